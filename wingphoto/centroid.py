@@ -308,12 +308,13 @@ def cntrd(image, peaks, sz):
     Raises
     ------
     ValueError
-        ``peaks`` not (N, 2), not integer-valued or NaN; ``image`` not 2-D.
+        ``peaks`` not (N, 2), not integer-valued or NaN; ``image`` not 2-D; ``sz`` even
+        (the original warns, then fails to index with the half-integer radius).
 
     Warns
     -----
     A ``logging`` warning (logger ``wingphoto.centroid``) names the peaks dropped near the
-    border and is issued when ``sz`` is even (the original's ``warning``).
+    border, and one is issued when ``peaks`` is empty (the original's ``warning``).
 
     Notes
     -----
@@ -329,8 +330,8 @@ def cntrd(image, peaks, sz):
       rather than on the guess. Brightness centred on the guess is reported there
       unbiased, but the mask reaches half a pixel further right/down than left/up, so a
       marker not fully inside the mask is pulled towards ``+x, +y``.
-    * ``sz`` should be odd (even values only warn); the squared radius of gyration is
-      measured from the mask centre (``x + 1/2, y + 1/2``), not from the centroid.
+    * The squared radius of gyration is measured from the mask centre
+      (``x + 1/2, y + 1/2``), not from the centroid.
     * A window summing to 0 gives NaN x, y (MATLAB's 0/0).
     * MATLAB rounds half away from zero (:func:`matlab_round`), numpy half to even: round
       sub-pixel guesses with :func:`matlab_round` (or ``np.ceil``, as ``trackcl.m`` did)
@@ -341,12 +342,13 @@ def cntrd(image, peaks, sz):
     >>> yy, xx = np.mgrid[:41, :43]
     >>> img = np.exp(-((xx - 20.3) ** 2 + (yy - 18.6) ** 2) / 4)
     >>> res = cntrd(img, [[20, 19]], 9)
-    >>> np.round(res.xy, 3).tolist(), res.kept.tolist()
-    ([[20.3, 18.6]], [True])
+    >>> np.round(res.xy, 2).tolist(), res.kept.tolist()   # truth (20.3, 18.6)
+    ([[20.3, 18.61]], [True])
     """
     im = _image2d(image)
-    if sz % 2 == 0:
-        logger.warning("cntrd: sz=%s should be odd, like bpass", sz)
+    if int(sz) != sz or sz < 1 or sz % 2 == 0:
+        # the original warns, then fails indexing with the half-integer r = (sz + 1) / 2
+        raise ValueError(f"sz must be a positive odd integer (like bpass), got {sz}")
     pk = np.asarray(peaks, dtype=np.float64)
     if pk.size == 0:
         logger.warning("cntrd: no peaks given (check the pkfnd threshold)")
