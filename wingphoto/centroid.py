@@ -345,13 +345,19 @@ def cntrd(image, peaks, sz):
     >>> np.round(res.xy, 2).tolist(), res.kept.tolist()   # truth (20.3, 18.6)
     ([[20.3, 18.61]], [True])
     """
+    return _cntrd(image, peaks, sz, log=True)
+
+
+def _cntrd(image, peaks, sz, *, log):
+    """:func:`cntrd`; ``log=False`` leaves reporting the border drop to the caller."""
     im = _image2d(image)
     if int(sz) != sz or sz < 1 or sz % 2 == 0:
         # the original warns, then fails indexing with the half-integer r = (sz + 1) / 2
         raise ValueError(f"sz must be a positive odd integer (like bpass), got {sz}")
     pk = np.asarray(peaks, dtype=np.float64)
     if pk.size == 0:
-        logger.warning("cntrd: no peaks given (check the pkfnd threshold)")
+        if log:
+            logger.warning("cntrd: no peaks given (check the pkfnd threshold)")
         return CntrdResult(np.zeros((0, 4)), np.zeros(0, dtype=bool))
     if pk.ndim == 1 and pk.shape == (2,):
         pk = pk[None, :]
@@ -371,7 +377,7 @@ def cntrd(image, peaks, sz):
     y1 = pk[:, 1] + 1
     kept = ((y1 > 1.5 * sz) & (y1 < nr - 1.5 * sz)
             & (x1 > 1.5 * sz) & (x1 < nc - 1.5 * sz))
-    if not kept.all():
+    if log and not kept.all():
         bad = np.flatnonzero(~kept)
         logger.warning(
             "cntrd dropped %d of %d peaks within 1.5*sz=%.1f px of the image border "
