@@ -478,12 +478,14 @@ class Picker(ImageView):
             self._apply(self.state.place, self._camera, x, y)
 
     def _press_target(self, x, y):
-        tol = GRAB_TOLERANCE / self.zoom
         picks = sorted(self.state.picks_of(self._camera), key=lambda p: p.point != self.state.current)
         for p in picks:  # the active marker first
+            # the edge band is at most a quarter of the box, so the inside stays grabbable
+            tx = min(GRAB_TOLERANCE / self.zoom, 0.25 * p.half_w)
+            ty = min(GRAB_TOLERANCE / self.zoom, 0.25 * p.half_h)
             dx, dy = abs(x - p.x), abs(y - p.y)
-            on_x_edge = abs(dx - p.half_w) <= tol and dy <= p.half_h + tol
-            on_y_edge = abs(dy - p.half_h) <= tol and dx <= p.half_w + tol
+            on_x_edge = abs(dx - p.half_w) <= tx and dy <= p.half_h + ty
+            on_y_edge = abs(dy - p.half_h) <= ty and dx <= p.half_w + tx
             if on_x_edge or on_y_edge:
                 return ("resize", p)
         for p in picks:

@@ -496,14 +496,22 @@ class PickerState:
         return dataclasses.replace(self.history[0], history=self.history[1:])
 
     # ---------------------------------------------------------------- export
-    def to_frame(self, camera):
+    def to_frame(self, camera, *, dropna=False):
         """Picks of a view as the tracker's picks table.
+
+        Parameters
+        ----------
+        camera : str
+        dropna : bool
+            Drop the rows of numbers missing in this view (the tracker needs a click for
+            every marker it tracks).
 
         Returns
         -------
         picks : pandas.DataFrame
-            Columns point (int64), x, y (px), half_w, half_h (px, float64); one row per
-            number ``0 .. n_rows - 1``, NaN where the number is missing in this view.
+            Columns point (int64), x, y (px), half_w, half_h (px, float64) and half_size
+            (the larger half side, for a square template); one row per number
+            ``0 .. n_rows - 1``, NaN where the number is missing in this view.
         """
         self._check_camera(camera)
         rows = np.full((self.n_rows, 4), np.nan)
@@ -511,6 +519,9 @@ class PickerState:
             rows[p.point] = (p.x, p.y, p.half_w, p.half_h)
         df = pd.DataFrame(rows, columns=["x", "y", "half_w", "half_h"])
         df.insert(0, "point", np.arange(self.n_rows, dtype=np.int64))
+        df["half_size"] = np.fmax(df["half_w"].to_numpy(), df["half_h"].to_numpy())
+        if dropna:
+            df = df[np.isfinite(df["x"].to_numpy())].reset_index(drop=True)
         return df
 
     def to_picks(self, camera):

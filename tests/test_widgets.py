@@ -1,0 +1,537 @@
+"""Picker and review widgets: pure state transitions, files, and the views driven headless.
+
+The views are driven through their handlers (display coordinates) and ``Button.click()``
+with the Agg backend; no browser is involved.
+"""
+import json
+import sys
+import types
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from wingphoto.widgets import Picker, TrackReview
+from wingphoto.widgets.state import (
+    Correction,
+    Pick,
+    PickerState,
+    ReviewState,
+    Viewport,
+    apply_corrections,
+    read_corrections,
+    replay_corrections,
+    write_corrections,
+)
+
+W, H = 60, 40  # non-square to catch x/y swaps
+
+
+# --------------------------------------------------------------------------- PickerState
+def _two_view_state():
+    s = PickerState(image_size=(W, H), n_points=3, half_size=(4, 3))
+    s = s.place("left", 10, 5).place("left", 20, 6).place("left", 30, 7)
+    return s.place("right", 12, 5).place("right", 22, 6)
+
+
+def test_place_numbers_in_order_and_switches_view_at_first_missing():
+    s = PickerState(image_size=(W, H), n_points=3)
+    s = s.place("left", 10, 5)
+    assert s.current == 1 and s.camera == "left"
+    s = s.place("left", 20, 6).place("left", 30, 7)
+    assert s.numbers("left") == [0, 1, 2]
+    s = s.select(camera="right")
+    assert s.current == 0  # the right view starts at its first missing number
+    s = s.place("right", 12, 5)
+    assert s.get("right", 0) == Pick(0, 12.0, 5.0, 10.0, 10.0)
+    assert s.missing() == {"left": [], "right": [1, 2]}
+    assert not s.is_complete
+
+
+def test_move_resize_delete_and_undo_return_previous_states():
+    s0 = _two_view_state()
+    s1 = s0.move("left", 1, 21.5, 6.5)
+    assert s1.get("left", 1) == Pick(1, 21.5, 6.5, 4.0, 3.0)
+    s2 = s1.resize("left", 1, 7, 2)
+    assert s2.get("left", 1).half_w == 7.0 and s2.get("left", 1).half_h == 2.0
+    s3 = s2.delete("right", 0)
+    assert s3.numbers("right") == [1] and s3.current == 0 and s3.camera == "right"
+    assert s3.undo() == s2
+    assert s3.undo().undo() == s1
+    assert s3.undo().undo().undo() == s0
+    # navigation is not an edit: undo skips it
+    assert s2.select(2, camera="left").next_point().undo() == s1
+    empty = PickerState(image_size=(W, H))
+    assert empty.undo() is empty and not empty.can_undo
+
+
+def test_place_on_a_placed_number_moves_it_and_keeps_its_box():
+    s = PickerState(image_size=(W, H)).place("left", 10, 5).resize("left", 0, 6, 6)
+    s = s.place("left", 11, 9, point=0)
+    assert s.get("left", 0) == Pick(0, 11.0, 9.0, 6.0, 6.0)
+    assert s.numbers("left") == [0]
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (lambda s: s.place("left", W - 0.4, 5), r"outside the left image \(width 60, height 40"),
+        (lambda s: s.place("left", 5, H), r"y=40.00\) is outside .* y in \[-0.5, 39.5\]"),
+        (lambda s: s.place("left", -0.6, 5), "outside the left image"),
+        (lambda s: s.place("middle", 5, 5), "camera must be one of"),
+        (lambda s: s.place("left", np.nan, 5), "x must be finite"),
+        (lambda s: s.move("right", 2, 5, 5), "point 2 is not placed in the right view"),
+        (lambda s: s.resize("left", 0, 0, 3), "half_w and half_h must be positive"),
+        (lambda s: s.select(3), r"must be in 0..2 \(n_points=3\)"),
+        (lambda s: s.select(-1), "non-negative integer"),
+        (lambda s: s.delete("right", 2), "not placed"),
+    ],
+)
+def test_invalid_transitions_raise_clear_errors(action, message):
+    s = _two_view_state()
+    with pytest.raises(ValueError, match=message):
+        action(s)
+
+
+def test_edge_pixels_are_inside():
+    s = PickerState(image_size=(W, H)).place("left", -0.5, -0.5).place("left", W - 0.5, H - 0.5)
+    assert s.numbers("left") == [0, 1]
+
+
+def test_picks_table_has_nan_for_a_number_missing_in_one_view():
+    s = _two_view_state()
+    right = s.to_frame("right")
+    assert right.columns.tolist() == ["point", "x", "y", "half_w", "half_h", "half_size"]
+    assert right["point"].dtype == np.int64 and right["x"].dtype == np.float64
+    assert right["point"].tolist() == [0, 1, 2]
+    np.testing.assert_array_equal(right.loc[2, ["x", "y", "half_w", "half_h"]].to_numpy(float), np.full(4, np.nan))
+    np.testing.assert_array_equal(s.to_picks("left"), [[10, 5], [20, 6], [30, 7]])
+    assert s.to_frame("left")["half_size"].tolist() == [4.0, 4.0, 4.0]
+    assert s.to_frame("right", dropna=True)["point"].tolist() == [0, 1]
+    with pytest.raises(ValueError, match=r"incomplete: right view lacks \[2\]"):
+        s.check_complete()
+    assert s.place("right", 33, 7).check_complete().is_complete
+    with pytest.raises(ValueError, match="no markers picked"):
+        PickerState().check_complete()
+
+
+def test_json_round_trip_and_file_round_trip(tmp_path):
+    s = _two_view_state().resize("right", 1, 5.25, 2.5)
+    back = PickerState.from_json(s.to_json())
+    assert back == s and back.history == ()
+    data = json.loads(s.to_json())
+    assert data["format"] == "wingphoto-picks" and data["picks"]["right"][1]["half_w"] == 5.25
+    path = s.save(tmp_path / "sub" / "picks.json")
+    assert PickerState.load(path) == s
+    pd.testing.assert_frame_equal(PickerState.load(path).to_frame("right"), s.to_frame("right"))
+
+
+def test_failed_save_keeps_the_previous_file(tmp_path, monkeypatch):
+    path = tmp_path / "picks.json"
+    old = _two_view_state()
+    old.save(path)
+    before = path.read_bytes()
+
+    def boom(self):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(PickerState, "to_json", boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        old.place("right", 33, 7).save(path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["picks.json"]
+
+
+def test_load_errors_name_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="picks file .*nope.json not found"):
+        PickerState.load(tmp_path / "nope.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(ValueError, match="bad.json is not valid JSON"):
+        PickerState.load(bad)
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"format": "something-else"}))
+    with pytest.raises(ValueError, match="not a wingphoto picks file"):
+        PickerState.load(other)
+    dup = json.loads(_two_view_state().to_json())
+    dup["picks"]["left"].append(dup["picks"]["left"][0])
+    with pytest.raises(ValueError, match="repeat a point number"):
+        PickerState.from_json(json.dumps(dup))
+
+
+def test_from_picks_arrays_skip_nan_rows():
+    left = np.array([[10.0, 5.0], [20.0, 6.0], [30.0, 7.0]])
+    right = np.array([[12.0, 5.0], [np.nan, np.nan], [32.0, 7.0]])
+    s = PickerState.from_picks({"left": left, "right": right}, image_size=(W, H), half_size=(5, 5))
+    np.testing.assert_array_equal(s.to_picks("left"), left)
+    np.testing.assert_array_equal(s.to_picks("right"), right)
+    assert s.missing() == {"left": [], "right": [1]}
+    s2 = PickerState.from_picks({"left": s.to_frame("left")}, image_size=(W, H))
+    assert s2.cameras == ("left",) and s2.picks_of("left") == s.picks_of("left")
+
+
+# --------------------------------------------------------------------------- Viewport
+def test_viewport_identity_at_zoom_one_and_formula_when_zoomed():
+    vp = Viewport(W, H)
+    assert vp.to_image(12.25, 7.5) == (12.25, 7.5)
+    vp = Viewport(W, H, zoom=4.0, cx=20.0, cy=10.0)
+    # x = cx + (u - (W - 1) / 2) / zoom
+    assert vp.to_image(29.5, 19.5) == (20.0, 10.0)
+    assert vp.to_image(33.5, 15.5) == (21.0, 9.0)
+    u, v = vp.to_display(np.array([3.0, 25.0]), np.array([8.0, 12.0]))
+    np.testing.assert_allclose(vp.to_image(u, v), [[3.0, 25.0], [8.0, 12.0]])
+    # the display never leaves the image: the centre is clamped
+    corner = Viewport(W, H, zoom=2.0, cx=0.0, cy=1000.0)
+    assert (corner.cx, corner.cy) == (-0.5 + W / 4, H - 0.5 - H / 4)
+    assert corner.extent[0] == pytest.approx(-0.5) and corner.extent[2] == pytest.approx(H - 0.5)
+    with pytest.raises(ValueError, match="zoom must be at least 1"):
+        Viewport(W, H, zoom=0.5)
+
+
+# --------------------------------------------------------------------------- Picker view
+def _frames(seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, 255, (3, H, W), dtype=np.uint8), rng.integers(0, 255, (3, H, W), dtype=np.uint8)
+
+
+def test_picker_clicks_and_camera_toggle_fill_both_views():
+    left, right = _frames()
+    p = Picker(left, right, n_points=2, half_size=(4, 4))
+    p.on_click(10.0, 5.0)
+    p.on_click(20.0, 30.0)
+    p.camera_toggle.value = "right"  # the ToggleButtons observer switches the view
+    assert p.state.camera == "right" and p.state.current == 0
+    p.on_click(11.0, 6.0)
+    p.on_click(21.0, 31.0)
+    assert p.state.is_complete
+    np.testing.assert_array_equal(p.state.to_picks("left"), [[10, 5], [20, 30]])
+    np.testing.assert_array_equal(p.state.to_picks("right"), [[11, 6], [21, 31]])
+    # the figure shows the right view's rectangles at the right pixels (x horizontal)
+    rects = [(r.get_x(), r.get_y(), r.get_width(), r.get_height()) for r in p.ax.patches]
+    assert rects == [(7.0, 2.0, 8.0, 8.0), (17.0, 27.0, 8.0, 8.0)]
+    assert p.ax.images[0].get_array().shape == (H, W)
+    p.fig.canvas.draw()  # renders with Agg
+
+
+def test_picker_click_under_zoom_converts_display_to_image():
+    left, right = _frames()
+    p = Picker(left, right)
+    p.on_click(40.0, 20.0)
+    p.select_point(0)
+    p.set_zoom(4.0)  # centred on point 0 at (40, 20)
+    assert p.zoom_slider.value == 4.0
+    vp = p.viewport
+    assert (vp.cx, vp.cy) == (40.0, 20.0)
+    # display (29.5, 19.5) is the display centre -> the image pixel (40, 20); 4 px right = 1 image px
+    p.arm_move()
+    p.on_click(33.5, 17.5)
+    assert p.state.get("left", 0)[:3] == (0, 41.0, 19.5)
+    assert p.to_display(41.0, 19.5) == (33.5, 17.5)
+
+
+def test_picker_drag_moves_then_resizes_one_undo_each():
+    left, right = _frames()
+    p = Picker(left, right, half_size=(5, 5))
+    p.on_click(20.0, 20.0)
+    before = p.state
+    p.on_drag(21.0, 19.0, 25.0, 22.0)  # grab inside the rectangle: move by the drag
+    assert p.state.get("left", 0)[:3] == (0, 24.0, 23.0)
+    assert p.state.undo() == before
+    p.on_drag(29.0, 23.0, 31.0, 26.0)  # grab the right edge (x = 24 + 5): resize
+    assert p.state.get("left", 0)[3:] == (7.0, 3.0)
+    p.undo_button.click()
+    p.undo_button.click()
+    assert p.state == before
+
+
+def test_picker_drag_on_empty_image_pans_when_zoomed():
+    left, right = _frames()
+    p = Picker(left, right)
+    p.set_zoom(2.0)
+    cx, cy = p.viewport.cx, p.viewport.cy
+    p.on_drag(10.0, 10.0, 16.0, 14.0)
+    assert (p.viewport.cx, p.viewport.cy) == (cx - 3.0, cy - 2.0)
+    assert p.state.numbers("left") == []
+
+
+def test_picker_buttons_delete_undo_save_load(tmp_path):
+    left, right = _frames()
+    path = tmp_path / "picks.json"
+    p = Picker(left, right, picks_path=path)
+    p.on_click(10.0, 5.0)
+    p.on_click(20.0, 6.0)
+    p.prev_button.click()
+    assert p.state.current == 1 and p.point_box.value == 1
+    p.delete_button.click()
+    assert p.state.numbers("left") == [0]
+    p.undo_button.click()
+    assert p.state.numbers("left") == [0, 1]
+    p.save_button.click()
+    assert "saved 2 markers" in p.message and PickerState.load(path) == p.state
+    p.delete(0)
+    p.load_button.click()
+    assert p.state.numbers("left") == [0, 1] and p.message.startswith("loaded")
+    p.undo_button.click()  # loading is undoable
+    assert p.state.numbers("left") == [1]
+    p.move_button.click()  # point 0 (active after the delete) is no longer placed
+    assert "not placed" in p.message
+
+
+def test_picker_shows_errors_instead_of_raising():
+    left, right = _frames()
+    p = Picker(left, right, n_points=1)
+    p.on_click(-3.0, 5.0)
+    assert "outside the left image" in p.message and p.state.numbers("left") == []
+    p.path_text.value = ""
+    p.save_button.click()
+    assert "no picks file" in p.message
+
+
+def test_load_or_pick_headless_path(tmp_path, monkeypatch):
+    left, right = _frames()
+    path = tmp_path / "picks.json"
+    monkeypatch.setenv("WINGPHOTO_HEADLESS", "1")
+    with pytest.raises(FileNotFoundError, match="WINGPHOTO_HEADLESS is set but the picks file"):
+        Picker.load_or_pick(left, right, picks_path=path)
+    _two_view_state().save(path)
+    p = Picker.load_or_pick(left, right, picks_path=path)
+    assert p.state == _two_view_state()
+    monkeypatch.setenv("WINGPHOTO_HEADLESS", "0")
+    fresh = Picker.load_or_pick(left, right, picks_path=tmp_path / "new.json", n_points=4)
+    assert fresh.state.n_rows == 4 and fresh.state.numbers("left") == []
+    small = np.zeros((2, 30, 30), np.uint8)
+    with pytest.raises(ValueError, match=r"picks were made on left images of size \(60, 40\)"):
+        Picker.load_or_pick(small, small, picks_path=path)
+    with pytest.raises(ValueError, match="pass frames_right exactly"):
+        Picker.load_or_pick(left, picks_path=path)
+
+
+# --------------------------------------------------------------------------- ReviewState
+def _tracks(n_frames=8, n_points=3):
+    rows = []
+    for cam, dx in (("left", 0.0), ("right", 2.0)):
+        for f in range(n_frames):
+            for p in range(n_points):
+                rows.append((cam, f, p, 10.0 + 10 * p + f + dx, 20.0 + p, 0.95, "ok"))
+    t = pd.DataFrame(rows, columns=["camera", "frame", "point", "x", "y", "score", "status"])
+    t = t.astype({"frame": np.int64, "point": np.int64})
+    bad = [("left", 3, 1, "flagged"), ("right", 3, 1, "lost"), ("left", 5, 2, "lost"), ("right", 6, 0, "flagged")]
+    for cam, f, p, status in bad:
+        m = (t["camera"] == cam) & (t["frame"] == f) & (t["point"] == p)
+        t.loc[m, "status"] = status
+        t.loc[m, "score"] = 0.2
+        if status == "lost":
+            t.loc[m, ["x", "y"]] = np.nan
+    return t
+
+
+def test_review_state_problems_navigation_and_correction():
+    t = _tracks()
+    s = ReviewState(t, image_size=(W, H))
+    assert s.problems == ((3, 1), (5, 2), (6, 0))
+    s = s.next_problem()
+    assert (s.frame, s.point, s.camera) == (3, 1, "left")
+    s = s.select(camera="right").next_problem(-1)  # wraps to the last one
+    assert (s.frame, s.point, s.camera) == (6, 0, "right")
+    s = s.goto(5).select(2, camera="left")
+    s2 = s.correct("left", 2, 5, 17.25, 22.5)
+    row = s2.tracks.query("camera == 'left' and frame == 5 and point == 2").iloc[0]
+    assert (row.x, row.y, row.status) == (17.25, 22.5, "manual") and np.isnan(row.score)
+    assert s2.problems == ((3, 1), (6, 0))
+    assert s2.corrections == (Correction("left", 2, 5, 17.25, 22.5),)
+    # the source is untouched, undo restores the previous state
+    assert t.loc[(t["camera"] == "left") & (t["frame"] == 5) & (t["point"] == 2), "status"].item() == "lost"
+    back = s2.undo()
+    assert back.corrections == () and back.problems == s.problems and (back.frame, back.point) == (5, 2)
+    assert ReviewState(t.iloc[:0]).next_problem().problems == ()
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (lambda s: s.goto(8), r"frame must be in 0..7"),
+        (lambda s: s.correct("left", 0, 2, W + 1.0, 3.0), "outside the left image"),
+        (lambda s: s.correct("middle", 0, 2, 1.0, 3.0), "camera must be one of"),
+        (lambda s: s.correct("left", 0, -1, 1.0, 3.0), "frame must be a non-negative integer"),
+        (lambda s: s.select(camera="top"), "camera must be one of"),
+    ],
+)
+def test_review_state_validation(action, message):
+    s = ReviewState(_tracks(), image_size=(W, H))
+    with pytest.raises(ValueError, match=message):
+        action(s)
+
+
+def test_review_state_rejects_a_table_without_track_columns():
+    with pytest.raises(ValueError, match=r"lacks columns \['status'\]"):
+        ReviewState(_tracks().drop(columns="status"))
+
+
+def test_apply_corrections_last_wins_and_adds_absent_rows():
+    t = _tracks()
+    log = [("left", 0, 1, 1.0, 2.0), ("left", 0, 1, 3.0, 4.0), ("right", 7, 9, 5.0, 6.0)]
+    out = apply_corrections(t, log)
+    assert len(out) == len(t) + 1
+    assert out.query("camera == 'left' and frame == 1 and point == 0")[["x", "y"]].to_numpy().tolist() == [[3.0, 4.0]]
+    new = out.query("point == 7").iloc[0]
+    assert (new.camera, new.frame, new.x, new.status) == ("right", 9, 5.0, "manual")
+    assert out.dtypes.to_dict() == t.dtypes.to_dict()
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_corrections_file_round_trip(tmp_path, suffix):
+    log = (Correction("left", 2, 5, 17.123456789012345, 22.5), Correction("right", 0, 6, 1.0, 0.25))
+    path = write_corrections(log, tmp_path / f"log{suffix}")
+    assert read_corrections(path) == log
+    s = ReviewState(_tracks()).load_corrections(path)
+    assert s.corrections == log and s.undo().corrections == ()
+
+
+def test_corrections_file_errors(tmp_path):
+    with pytest.raises(ValueError, match="must end in .csv or .json"):
+        write_corrections([], tmp_path / "log.txt")
+    with pytest.raises(FileNotFoundError, match="corrections file .*missing.csv not found"):
+        read_corrections(tmp_path / "missing.csv")
+    (tmp_path / "bad.csv").write_text("camera,frame\nleft,1\n")
+    with pytest.raises(ValueError, match="lacks columns"):
+        read_corrections(tmp_path / "bad.csv")
+    (tmp_path / "bad.json").write_text(json.dumps({"format": "x"}))
+    with pytest.raises(ValueError, match="not a wingphoto corrections file"):
+        read_corrections(tmp_path / "bad.json")
+
+
+# --------------------------------------------------------------------------- TrackReview view
+def _hold_position(frames, tracks, points, frame):
+    """A deterministic stand-in tracker: the corrected position is held for later frames."""
+    out = tracks.copy()
+    for p in points:
+        start = out[(out["frame"] == frame) & (out["point"] == p)].iloc[0]
+        later = (out["frame"] > frame) & (out["point"] == p)
+        out.loc[later, ["x", "y"]] = (start.x, start.y)
+        out.loc[later, "status"] = "ok"
+        out.loc[later, "score"] = 1.0
+    return out
+
+
+def _stack():
+    rng = np.random.default_rng(3)
+    return {c: rng.integers(0, 255, (8, H, W), dtype=np.uint8) for c in ("left", "right")}
+
+
+def test_review_next_problem_click_corrects_and_retracks_forward():
+    t = _tracks()
+    calls = []
+
+    def retrack(frames, tracks, points, frame):
+        calls.append((frames.shape, set(tracks["camera"]), points, frame))
+        return _hold_position(frames, tracks, points, frame)
+
+    r = TrackReview(_stack(), t, retrack=retrack)
+    r.next_problem_button.click()
+    assert (r.state.frame, r.state.point, r.state.camera) == (3, 1, "left")
+    assert r.frame_slider.value == 3 and r.problem_list.value == (3, 1)
+    r.on_click(24.0, 21.5)
+    assert calls == [((8, H, W), {"left"}, [1], 3)]
+    left = r.state.tracks.query("camera == 'left' and point == 1").set_index("frame")
+    assert left.loc[3, "status"] == "manual" and (left.loc[3, "x"], left.loc[3, "y"]) == (24.0, 21.5)
+    assert (left.loc[4:, ["x", "y"]].to_numpy() == [24.0, 21.5]).all() and (left.loc[4:, "status"] == "ok").all()
+    assert (left.loc[:2, "x"].to_numpy() == [20.0, 21.0, 22.0]).all()  # earlier frames untouched
+    right = r.state.tracks.query("camera == 'right'")
+    pd.testing.assert_frame_equal(right.reset_index(drop=True), t.query("camera == 'right'").reset_index(drop=True))
+    r.undo_button.click()  # one undo reverts the correction and its re-tracking
+    pd.testing.assert_frame_equal(r.state.tracks, t)
+
+
+def test_review_log_replays_to_the_same_tracks(tmp_path):
+    t = _tracks()
+    stack = _stack()
+    r = TrackReview(stack, t, retrack=_hold_position, corrections_path=tmp_path / "log.csv")
+    r.next_problem()
+    r.on_click(24.0, 21.5)
+    r.camera_toggle.value = "right"
+    r.frame_slider.value = 3
+    r.point_box.value = 1
+    r.on_click(25.0, 21.0)
+    r.problem_list.value = (5, 2)  # choosing an item of the list goes there
+    assert (r.state.frame, r.state.point, r.state.camera) == (5, 2, "left")
+    r.correct(2, 25.0, 22.0)
+    r.save_button.click()
+    assert "saved 3 corrections" in r.message
+    log = read_corrections(tmp_path / "log.csv")
+    assert log == r.state.corrections
+    replayed = replay_corrections(t, log, retrack=_hold_position, frames=stack)
+    pd.testing.assert_frame_equal(replayed, r.state.tracks.sort_values(["camera", "frame", "point"]).reset_index(drop=True))
+    # without re-tracking, replay gives the corrected positions only
+    plain = replay_corrections(t, log)
+    assert (plain["status"] == "manual").sum() == 3
+    # loading the log into a fresh review applies it
+    r2 = TrackReview(stack, t, retrack=False, corrections_path=tmp_path / "log.csv")
+    r2.load_button.click()
+    assert r2.state.corrections == log and r2.message.startswith("loaded 3")
+
+
+def test_review_drag_a_point_corrects_it_and_zoom_converts_coordinates():
+    t = _tracks()
+    r = TrackReview(_stack()["left"], t.query("camera == 'left'"), retrack=False)
+    r.goto(2)
+    r.select_point(1)
+    r.set_zoom(2.0)  # centred on point 1 at frame 2: (22, 21)
+    assert (r.viewport.cx, r.viewport.cy) == (22.0, 21.0)
+    r.select_point(0)  # point 0 at (12, 20) is near the left edge: the centre is clamped
+    assert (r.viewport.cx, r.viewport.cy) == (-0.5 + W / 4, 20.0)
+    u, v = r.to_display(32.0, 21.0)  # point 2 is drawn at (32, 21)
+    r.on_drag(u, v, u + 4.0, v - 2.0)  # 4 display px = 2 image px at zoom 2
+    assert r.state.point == 2
+    assert r.state.corrections == (Correction("left", 2, 2, 34.0, 20.0),)
+    r.fig.canvas.draw()
+
+
+def test_review_keeps_the_correction_when_retracking_fails():
+    def broken(frames, tracks, points, frame):
+        raise RuntimeError("template left the image")
+
+    r = TrackReview(_stack(), _tracks(), retrack=broken)
+    r.next_problem()
+    r.on_click(24.0, 21.5)
+    assert len(r.state.corrections) == 1 and "re-tracking failed: template left the image" in r.message
+    r.retrack_check.value = False
+    r.on_click(25.0, 21.5)
+    assert "re-tracked" not in r.message and len(r.state.corrections) == 2
+
+
+def test_review_uses_track_retrack_from_when_available(monkeypatch):
+    fake = types.ModuleType("wingphoto.track")
+    fake.retrack_from = _hold_position
+    monkeypatch.setitem(sys.modules, "wingphoto.track", fake)
+    r = TrackReview(_stack(), _tracks())
+    assert r.retrack is _hold_position and r.retrack_check.value
+    assert TrackReview(_stack(), _tracks(), retrack=False).retrack is None
+
+
+def test_review_errors_are_shown_not_raised(tmp_path):
+    r = TrackReview(_stack(), _tracks(), retrack=False)
+    r.on_click(-5.0, 3.0)
+    assert "outside the left image" in r.message and r.state.corrections == ()
+    r.save_button.click()
+    assert "no corrections file" in r.message
+    r.path_text.value = str(tmp_path / "none.json")
+    r.load_button.click()
+    assert "not found" in r.message
+    with pytest.raises(ValueError, match=r"frames lacks cameras \['right'\]"):
+        TrackReview({"left": _stack()["left"]}, _tracks())
+
+
+def test_state_module_imports_no_widget_or_plotting_library():
+    import ast
+    import pathlib
+
+    import wingphoto.widgets.state as state
+
+    tree = ast.parse(pathlib.Path(state.__file__).read_text())
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names.add(node.module.split(".")[0])
+    assert not names & {"ipywidgets", "matplotlib", "IPython", "ipympl"}
