@@ -333,7 +333,14 @@ def _scan_tiff(path, as_gray):
     except (FileNotFoundError, PermissionError):
         raise
     except Exception as exc:
-        raise ValueError(f"cannot read TIFF file {path} ({exc}); the file is corrupt or not a TIFF: re-export it") from exc
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+        if magic not in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
+            raise ValueError(
+                f"cannot read TIFF file {path}: it is not a TIFF (it starts with {magic!r}); "
+                f"check the file and its extension"
+            ) from exc
+        raise ValueError(f"TIFF file {path} is truncated or corrupt ({exc}); re-copy or re-export it") from exc
     if errors:
         raise ValueError(f"TIFF file {path} is truncated or corrupt (tifffile: {errors[0]}); re-copy or re-export it")
     if not pages:
