@@ -226,3 +226,11 @@ def test_frames_of_differing_size():
     frames[2] = frames[2][:, :-1]
     with pytest.raises(ValueError, match="frame 2 has shape"):
         track_thesis(frames, [[30, 28]], progress=False)
+
+
+def test_peak_ties_resolve_as_matlab_find():
+    from wingphoto.thesis import _peak
+
+    C = np.zeros((4, 5))
+    C[3, 1] = C[1, 2] = 0.9  # MATLAB's find is column-major: (row 3, col 1) comes first
+    assert _peak(C) == (3, 1, 0.9)

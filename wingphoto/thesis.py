@@ -211,9 +211,12 @@ def _parse_corrections(corrections, camera, n_points):
 
 def _peak(C):
     """MATLAB ``find(C == max(C(:)))``, first hit in column-major order, and the max."""
-    mx = C.max()
+    k = int(np.argmax(C))  # first in row-major order
+    mx = C.flat[k]
+    if np.count_nonzero(C == mx) == 1:
+        return k // C.shape[1], k % C.shape[1], float(mx)
     rows, cols = np.nonzero(C == mx)
-    k = np.lexsort((rows, cols))[0] if rows.size > 1 else 0
+    k = np.lexsort((rows, cols))[0]
     return int(rows[k]), int(cols[k]), float(mx)
 
 
