@@ -1192,16 +1192,16 @@ def save_bouguet_calib(camera, path, *, uncertainty=None, err_std=None, extra=No
     extra : dict, optional
         More variables to store (valid MATLAB names that do not clash with the above).
 
+    Raises
+    ------
+    ValueError
+        ``camera`` is not a Camera, or ``uncertainty``/``err_std``/``extra`` are malformed.
+
     Notes
     -----
     Variables written: ``fc, cc, kc, alpha_c, KK`` (+ ``nx, ny``, ``err_std``,
     ``*_error`` when known), as MATLAB column vectors (``fc`` is (2, 1), ``kc`` (5, 1)).
     The toolbox's ``KK`` is ``[fc1, alpha_c*fc1, cc1; 0, fc2, cc2; 0, 0, 1]``.
-
-    Raises
-    ------
-    ValueError
-        ``camera`` is not a Camera, or ``uncertainty``/``err_std``/``extra`` are malformed.
     """
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a wingphoto.Camera, got {type(camera).__name__}")
@@ -1298,6 +1298,12 @@ def save_bouguet_stereo(rig, path, *, uncertainty=None, extra=None):
     extra : dict, optional
         More variables to store (valid MATLAB names that do not clash with the above).
 
+    Raises
+    ------
+    ValueError
+        ``rig`` is not a StereoRig, the cameras' image sizes differ, or ``uncertainty``
+        / ``extra`` are malformed.
+
     Notes
     -----
     Variables written: ``om, R, T, fc_left, cc_left, kc_left, alpha_c_left, KK_left``,
@@ -1305,12 +1311,6 @@ def save_bouguet_stereo(rig, path, *, uncertainty=None, extra=None):
     MATLAB columns (``om``, ``T``: (3, 1); ``fc``, ``cc``: (2, 1); ``kc``: (5, 1)),
     scalars as (1, 1), all double. OpenCV's ``stereoCalibrate`` R, T have the same
     meaning as the toolbox's R, T.
-
-    Raises
-    ------
-    ValueError
-        ``rig`` is not a StereoRig, the cameras' image sizes differ, or ``uncertainty``
-        / ``extra`` are malformed.
     """
     if not isinstance(rig, StereoRig):
         raise ValueError(f"rig must be a wingphoto.StereoRig, got {type(rig).__name__}")
@@ -1444,7 +1444,7 @@ def _read_table(path, kinds, what):
         raise FileNotFoundError(f"{what} file {path} not found; check the path")
     try:
         header = pd.read_csv(path, nrows=0, encoding="utf-8").columns
-        na_values = {c: [""] if kinds.get(c) == "str" else ["", "NaN", "nan", "NA"] for c in header}
+        na_values = {c: [""] if kinds.get(c) == "str" else ["", "NaN", "nan"] for c in header}
         dtype = {c: object for c, k in kinds.items() if k == "str" and c in header}
         # pandas >= 3 parses floats exactly by default and deprecates float_precision
         exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
