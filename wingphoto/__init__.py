@@ -8,3 +8,21 @@ from .camera import Camera, StereoRig, rodrigues
 from .triangulate import reprojection_error, stereo_triangulation, triangulate_tracks
 
 __version__ = "0.1.0"
+from .io import (
+    POINT_COLUMNS,
+    TRACK_COLUMNS,
+    BouguetCalib,
+    Sequence,
+    atomic_write,
+    empty_points,
+    empty_tracks,
+    load_bouguet_calib,
+    load_bouguet_stereo,
+    read_points_csv,
+    read_sequence,
+    read_tracks_csv,
+    save_bouguet_calib,
+    save_bouguet_stereo,
+    write_points_csv,
+    write_tracks_csv,
+)
