@@ -648,6 +648,8 @@ def _gather_views(items, pattern_size, n_points, *, regions, names, window, meth
                 f"{what}[{i}] looks like corners of shape {arr.shape}, but the board has {n_points} "
                 f"corners (pattern_size {pattern_size}); pass one (x, y) row per corner, NaN for missing"
             )
+        if label is None and not isinstance(item, (str, os.PathLike)):
+            label = f"view {i}"
         det = find_corners(item, pattern_size, rows=rows, cols=cols, window=window, method=method, name=label)
         if det.found:
             views.append(_View(det.name, np.array(det.corners), None, det.image_size))
@@ -1016,11 +1018,11 @@ class CameraCalibration:
         )
 
 
-def _calibrate_from_views(views, boards, image_size, est, pattern_size, square_size, suppressed=()):
+def _calibrate_from_views(views, boards, image_size, est, pattern_size, square_size, suppressed=(), what="views"):
     views = [dataclasses.replace(v) for v in views]
     used = _screen_views(views, boards, suppressed)
     if len(used) < _MIN_VIEWS:
-        raise _too_few(views, used, "views")
+        raise _too_few(views, used, what)
     for v in views:
         if v.reason:
             logger.warning("view %s not used: %s", v.name, v.reason)
@@ -1394,8 +1396,12 @@ def _stereo_from_views(
     views_l = [dataclasses.replace(v) for v in views_l]
     views_r = [dataclasses.replace(v) for v in views_r]
     # single-camera calibrations on every view each camera saw (suppressed pairs excluded)
-    mono_l = _calibrate_from_views(views_l, boards, size_l, est_l, pattern_size, square_size, suppressed)
-    mono_r = _calibrate_from_views(views_r, boards, size_r, est_r, pattern_size, square_size, suppressed)
+    mono_l = _calibrate_from_views(
+        views_l, boards, size_l, est_l, pattern_size, square_size, suppressed, what="left-camera views"
+    )
+    mono_r = _calibrate_from_views(
+        views_r, boards, size_r, est_r, pattern_size, square_size, suppressed, what="right-camera views"
+    )
     reasons = {}
     for i in range(P):
         if i in suppressed:

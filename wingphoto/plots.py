@@ -1,0 +1,229 @@
+"""Diagnostic figures. Every function takes ``ax=None`` (a new figure) and returns the axes.
+
+Pixel axes follow ``docs/conventions.md``: (x, y) with (0, 0) at the centre of the
+top-left pixel, y drawn downwards.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["plot_corners", "plot_residuals", "plot_view_errors", "plot_coverage"]
+
+
+def _axes(ax):
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        _, ax = plt.subplots()
+    return ax
+
+
+def _colours(n):
+    import matplotlib
+
+    cmap = matplotlib.colormaps["turbo"]
+    return [cmap(v) for v in np.linspace(0.05, 0.95, max(n, 1))]
+
+
+# --- calibration diagnostics ---
+def _calibration_views(result, camera):
+    """(names, used, residuals, corners, image_size) of one camera of a calibration."""
+    from .calibrate import CameraCalibration, StereoCalibration
+
+    if isinstance(result, CameraCalibration):
+        if camera not in (None, "left", "right"):
+            raise ValueError(f"camera must be None for a single-camera calibration, got {camera!r}")
+        return list(result.views), np.asarray(result.used), result.residuals, result.corners, result.image_size
+    if isinstance(result, StereoCalibration):
+        side = camera or "left"
+        if side not in ("left", "right"):
+            raise ValueError(f"camera must be 'left' or 'right', got {camera!r}")
+        res = result.residuals_left if side == "left" else result.residuals_right
+        cor = result.corners_left if side == "left" else result.corners_right
+        size = (result.rig.left if side == "left" else result.rig.right).image_size
+        return list(result.pairs), np.asarray(result.used), res, cor, size
+    raise ValueError(
+        f"result must be a CameraCalibration or StereoCalibration, got {type(result).__name__}"
+    )
+
+
+def plot_corners(image, detection, *, ax=None, cmap="gray"):
+    """Show an image with its detected corners, the first corner and the row order.
+
+    Parameters
+    ----------
+    image : (H, W) array_like or str or Path
+        The image the corners were found in.
+    detection : CornerDetection or (N, 2) array_like
+        Result of :func:`wingphoto.calibrate.find_corners` (or corner pixels).
+    ax : matplotlib Axes, optional
+    cmap : str, optional
+
+    Returns
+    -------
+    ax : matplotlib Axes
+        The corners joined in their order (a line along each row), corner 0 circled.
+    """
+    from .calibrate import CornerDetection, _read_gray
+
+    ax = _axes(ax)
+    img, _ = _read_gray(image, "image")
+    ax.imshow(img, cmap=cmap, interpolation="nearest")
+    if isinstance(detection, CornerDetection):
+        pts = detection.corners
+        title = detection.message
+    else:
+        pts = None if detection is None else np.asarray(detection, dtype=np.float64)
+        title = ""
+    if pts is not None:
+        ax.plot(pts[:, 0], pts[:, 1], "-", color="tab:orange", lw=0.8)
+        ax.plot(pts[:, 0], pts[:, 1], "+", color="tab:red", ms=6)
+        first = pts[np.flatnonzero(np.isfinite(pts[:, 0]))[:1]]
+        if len(first):
+            ax.plot(first[:, 0], first[:, 1], "o", mfc="none", mec="yellow", ms=12, mew=2)
+            ax.annotate("0", first[0], color="yellow", xytext=(6, -6), textcoords="offset points")
+    ax.set_title(title, fontsize=8)
+    return ax
+
+
+def plot_residuals(result, *, camera=None, ax=None, marker="+"):
+    """Scatter the reprojection residuals, one colour per view (the toolbox's "Analyse error").
+
+    Parameters
+    ----------
+    result : CameraCalibration or StereoCalibration
+    camera : {"left", "right"}, optional
+        Which camera of a stereo calibration (default left); None for one camera.
+    ax : matplotlib Axes, optional
+    marker : str, optional
+
+    Returns
+    -------
+    ax : matplotlib Axes
+        One scatter collection per used view (labelled by view name), x and y
+        residuals ``observed - projected`` in pixels, equal axis scales.
+    """
+    names, used, residuals, _, _ = _calibration_views(result, camera)
+    ax = _axes(ax)
+    idx = np.flatnonzero(used)
+    colours = _colours(len(idx))
+    for c, i in zip(colours, idx):
+        r = residuals[i]
+        ax.scatter(r[:, 0], r[:, 1], s=14, marker=marker, color=c, label=names[i], linewidths=0.8)
+    ax.set_xlabel("x residual (px)")
+    ax.set_ylabel("y residual (px)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.axhline(0, color="0.7", lw=0.5)
+    ax.axvline(0, color="0.7", lw=0.5)
+    side = f" ({camera or 'left'} camera)" if len(names) and hasattr(result, "rig") else ""
+    ax.set_title(f"Reprojection error (in pixel){side}")
+    if 0 < len(idx) <= 25:
+        ax.legend(fontsize=6, ncol=2, loc="best", markerscale=1.0)
+    return ax
+
+
+def plot_view_errors(result, *, camera=None, ax=None, worst=3, factor=2.0):
+    """Bar chart of each view's mean reprojection error, the worst views named.
+
+    Parameters
+    ----------
+    result : CameraCalibration or StereoCalibration
+    camera : {"left", "right"}, optional
+        For a stereo calibration, show one camera only (default: both, side by side).
+    ax : matplotlib Axes, optional
+    worst : int, optional
+        Annotate this many views with the largest errors by name (default 3).
+    factor : float, optional
+        Views that :func:`wingphoto.calibrate.suggest_suppress` (with this factor)
+        proposes to suppress are drawn in red.
+
+    Returns
+    -------
+    ax : matplotlib Axes
+        Mean pixel distance between observed and projected corners per view, with the
+        standard deviation over its corners as error bars; unused views are left empty.
+    """
+    from .calibrate import StereoCalibration, suggest_suppress
+
+    ax = _axes(ax)
+    sides = [camera] if camera is not None or not isinstance(result, StereoCalibration) else ["left", "right"]
+    suggested = set(suggest_suppress(result, factor=factor))
+    width = 0.8 / len(sides)
+    means_all = None
+    names = []
+    for k, side in enumerate(sides):
+        names, used, residuals, _, _ = _calibration_views(result, side)
+        n = len(names)
+        means, stds = np.full(n, np.nan), np.full(n, np.nan)
+        for i in np.flatnonzero(used):
+            d = np.hypot(residuals[i][:, 0], residuals[i][:, 1])
+            means[i], stds[i] = np.nanmean(d), np.nanstd(d)
+        x = np.arange(n) + (k - (len(sides) - 1) / 2) * width
+        base = "tab:blue" if k == 0 else "tab:cyan"
+        colours = ["tab:red" if names[i] in suggested else base for i in range(n)]
+        label = side if isinstance(result, StereoCalibration) else None
+        ax.bar(x, np.nan_to_num(means), width=width, yerr=np.nan_to_num(stds), color=colours,
+               capsize=2, label=label, error_kw={"lw": 0.8})
+        means_all = means if means_all is None else np.fmax(means_all, means)
+    order = [i for i in np.argsort(-np.nan_to_num(means_all, nan=-1.0)) if np.isfinite(means_all[i])]
+    for i in order[: max(0, int(worst))]:
+        ax.annotate(names[i], (i, means_all[i]), xytext=(0, 8), textcoords="offset points",
+                    ha="center", fontsize=7, color="tab:red", rotation=90)
+    ax.set_xticks(np.arange(len(names)))
+    ax.set_xticklabels(names, rotation=90, fontsize=6)
+    ax.set_ylabel("mean reprojection error (px)")
+    ax.set_title("Reprojection error per view")
+    if len(sides) > 1:
+        ax.legend(fontsize=7)
+    top = np.nanmax(means_all) if np.any(np.isfinite(means_all)) else 1.0
+    ax.set_ylim(0, top * 1.6)
+    return ax
+
+
+def plot_coverage(result, *, camera=None, ax=None, show_unused=True):
+    """Show where the corners fell in the image, one colour per view.
+
+    Parameters
+    ----------
+    result : CameraCalibration or StereoCalibration
+    camera : {"left", "right"}, optional
+        Which camera of a stereo calibration (default left).
+    ax : matplotlib Axes, optional
+    show_unused : bool, optional
+        Also draw the corners of views that were detected but not used (grey x).
+
+    Returns
+    -------
+    ax : matplotlib Axes
+        The image frame, each used view's corners and the outline of its board; areas
+        without corners (often the image corners) constrain the distortion poorly.
+    """
+    names, used, _, corners, size = _calibration_views(result, camera)
+    ax = _axes(ax)
+    idx = np.flatnonzero(used)
+    colours = _colours(len(idx))
+    pattern = getattr(result, "pattern_size", None)
+    for c, i in zip(colours, idx):
+        pts = corners[i]
+        ax.plot(pts[:, 0], pts[:, 1], ".", color=c, ms=3, label=names[i])
+        if pattern is not None and pts.shape[0] == pattern[0] * pattern[1]:
+            g = pts.reshape(pattern[1], pattern[0], 2)
+            ring = np.concatenate([g[0, :], g[:, -1], g[-1, ::-1], g[::-1, 0]])
+            ax.plot(ring[:, 0], ring[:, 1], "-", color=c, lw=0.6)
+    if show_unused:
+        for i in np.flatnonzero(~used):
+            if corners[i] is not None:
+                ax.plot(corners[i][:, 0], corners[i][:, 1], "x", color="0.6", ms=3)
+    if size is not None:
+        w, h = size
+        ax.plot([-0.5, w - 0.5, w - 0.5, -0.5, -0.5], [-0.5, -0.5, h - 0.5, h - 0.5, -0.5], "k-", lw=1)
+        ax.set_xlim(-0.5 - 0.02 * w, w - 0.5 + 0.02 * w)
+        ax.set_ylim(h - 0.5 + 0.02 * h, -0.5 - 0.02 * h)
+    else:
+        ax.invert_yaxis()
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (px)")
+    ax.set_ylabel("y (px)")
+    n = sum(int(np.isfinite(corners[i][:, 0]).sum()) for i in idx)
+    ax.set_title(f"Corner coverage: {n} corners in {len(idx)} views")
+    return ax
