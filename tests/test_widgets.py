@@ -535,3 +535,26 @@ def test_state_module_imports_no_widget_or_plotting_library():
         elif isinstance(node, ast.ImportFrom) and node.level == 0:
             names.add(node.module.split(".")[0])
     assert not names & {"ipywidgets", "matplotlib", "IPython", "ipympl"}
+
+
+def test_review_load_or_review_replays_the_saved_log(tmp_path):
+    t = _tracks()
+    stack = _stack()
+    path = tmp_path / "log.json"
+    fresh = TrackReview.load_or_review(stack, t, corrections_path=path, retrack=_hold_position)
+    assert fresh.state.corrections == () and fresh.state.problems == ((3, 1), (5, 2), (6, 0))
+    r = TrackReview(stack, t, retrack=_hold_position, corrections_path=path)
+    r.next_problem()
+    r.on_click(24.0, 21.5)
+    r.goto(5)
+    r.select_point(2)
+    r.on_click(30.0, 22.0)
+    r.save()
+    again = TrackReview.load_or_review(stack, t, corrections_path=path, retrack=_hold_position)
+    pd.testing.assert_frame_equal(again.state.tracks, r.state.tracks)
+    assert again.message.endswith("replayed")
+    plain = TrackReview.load_or_review(stack, t, corrections_path=path, retrack=False)
+    pd.testing.assert_frame_equal(plain.state.tracks, apply_corrections(t, r.state.corrections))
+    (tmp_path / "bad.json").write_text("[]")
+    with pytest.raises(ValueError, match="not a wingphoto corrections file"):
+        TrackReview.load_or_review(stack, t, corrections_path=tmp_path / "bad.json")

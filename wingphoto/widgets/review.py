@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from .picker import ImageView, frame_image, n_frames_of
-from .state import ReviewState, _merge_camera_tracks
+from .state import ReviewState, _merge_camera_tracks, read_corrections, replay_corrections
 
 __all__ = ["TrackReview", "default_retrack"]
 
@@ -364,18 +364,60 @@ class TrackReview(ImageView):
         self.render()
         return path
 
-    def load(self, path=None):
-        """Load a corrections log (replacing the current one) and apply it, without re-tracking."""
+    def load(self, path=None, *, replay=False):
+        """Load a corrections log (replacing the current one) and apply it (undoable).
+
+        Parameters
+        ----------
+        path : str or Path, optional
+            Default the Log box or ``corrections_path``.
+        replay : bool
+            Replay the log on the tracker's tracks with re-tracking after each correction
+            (:func:`~wingphoto.widgets.state.replay_corrections`), reproducing the reviewed
+            tracks; False only applies the corrected positions.
+        """
         try:
             path = self._path(path)
-        except ValueError as exc:
+            log = read_corrections(path)
+            tracks = None
+            if replay and self.retrack is not None:
+                tracks = replay_corrections(self.state.source, log, retrack=self.retrack, frames=self.frames)
+        except (ValueError, FileNotFoundError) as exc:
             self._report(exc)
             self.render()
             return
-        if self._apply(self.state.load_corrections, path):
-            self.corrections_path = path
-            self.message = f"loaded {len(self.state.corrections)} corrections from {path}"
-            self.render()
+        self.corrections_path = path
+        self._commit(self.state.with_corrections(log, tracks=tracks))
+        self.message = f"loaded {len(log)} corrections from {path}" + (", replayed" if tracks is not None else "")
+        self.render()
+
+    @classmethod
+    def load_or_review(cls, frames, tracks, *, corrections_path, replay=True, **kwargs):
+        """Open a review with the saved corrections applied when ``corrections_path`` exists.
+
+        The notebooks' headless path: with a saved log the reviewed tracks are reproduced
+        (replayed with re-tracking when available) without any click; without one the
+        tracks are shown as tracked.
+
+        Parameters
+        ----------
+        frames, tracks, **kwargs
+            As for :class:`TrackReview`.
+        corrections_path : str or Path
+            The corrections log (.csv or .json); Save and Load use it too.
+        replay : bool
+            Re-track after each loaded correction (see :meth:`load`).
+
+        Returns
+        -------
+        TrackReview
+        """
+        review = cls(frames, tracks, corrections_path=corrections_path, **kwargs)
+        if Path(corrections_path).is_file():
+            review.load(corrections_path, replay=replay)
+            if review.message and not review.message.startswith("loaded"):
+                raise ValueError(review.message)
+        return review
 
     # ---------------------------------------------------------------- rendering
     def _image(self, camera, frame):

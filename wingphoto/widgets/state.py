@@ -1050,9 +1050,16 @@ class ReviewState:
             return _push(self, source=tracks)
         return dataclasses.replace(self, source=tracks)
 
-    def with_corrections(self, corrections):
-        """Replace the corrections log (undoable), e.g. by one read from a file."""
-        return _push(self, corrections=tuple(_as_correction(c) for c in corrections))
+    def with_corrections(self, corrections, *, tracks=None):
+        """Replace the corrections log (undoable), e.g. by one read from a file.
+
+        ``tracks`` also replaces :attr:`source` in the same undo step (e.g. the result of
+        :func:`replay_corrections` with re-tracking).
+        """
+        changes = {"corrections": tuple(_as_correction(c) for c in corrections)}
+        if tracks is not None:
+            changes["source"] = _check_tracks(tracks)
+        return _push(self, **changes)
 
     @property
     def can_undo(self):
