@@ -460,7 +460,8 @@ def test_review_log_replays_to_the_same_tracks(tmp_path):
     log = read_corrections(tmp_path / "log.csv")
     assert log == r.state.corrections
     replayed = replay_corrections(t, log, retrack=_hold_position, frames=stack)
-    pd.testing.assert_frame_equal(replayed, r.state.tracks.sort_values(["camera", "frame", "point"]).reset_index(drop=True))
+    reviewed = r.state.tracks.sort_values(["camera", "frame", "point"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(replayed, reviewed)
     # without re-tracking, replay gives the corrected positions only
     plain = replay_corrections(t, log)
     assert (plain["status"] == "manual").sum() == 3

@@ -417,7 +417,8 @@ def _leading_edge_directions(P, cols, root):
             continue
         d = vt[0]
         r = root[t] if root is not None else P[t, cols[-1]]
-        ref = (tip[t] if np.all(np.isfinite(tip[t])) else pts.mean(axis=0)) - (r if np.all(np.isfinite(r)) else pts.mean(axis=0))
+        centre = pts.mean(axis=0)
+        ref = (tip[t] if np.all(np.isfinite(tip[t])) else centre) - (r if np.all(np.isfinite(r)) else centre)
         if not np.all(np.isfinite(ref)) or np.linalg.norm(ref) < 1e-12:
             ref = pts[0] - pts[-1]  # ordered tip first: first seen minus last seen
         D[t] = d if d @ ref >= 0 else -d

@@ -610,8 +610,9 @@ class Picker(ImageView):
                          color=colour, fontsize=9, clip_on=True)
         missing = state.missing()
         parts = [f"<b>{cam}</b> view, frame {self.frame}, active point <b>{state.current}</b>"]
-        parts.append(" | ".join(f"{c}: {len(state.numbers(c))} placed" + (f", missing {missing[c]}" if missing[c] else "")
-                                for c in state.cameras))
+        counts = [f"{c}: {len(state.numbers(c))} placed" + (f", missing {missing[c]}" if missing[c] else "")
+                  for c in state.cameras]
+        parts.append(" | ".join(counts))
         if state.is_complete:
             parts.append("complete")
         if self.message:
