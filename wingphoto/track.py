@@ -263,11 +263,27 @@ class _DiskCache:
         gx = np.tile(o, len(o)).astype(np.float32)
         gy = np.repeat(o, len(o)).astype(np.float32)
         self.gx, self.gy = gx, gy
-        self.gxy = np.stack([gx, gy], axis=1)  # (K, 2)
+        self.gxy = np.ascontiguousarray(np.stack([gx, gy], axis=1))  # (K, 2)
         d2 = gx * gx + gy * gy
         r2 = (radii**2)[:, None]
         self.disk = (d2[None, :] <= r2).astype(np.float32)
         self.ring = ((d2[None, :] > r2) & (d2[None, :] <= (radii[:, None] + 2.0) ** 2)).astype(np.float32)
+
+
+def _gather(frame, ix, iy, o):
+    """(n, len(o)**2) float32 patches of ``frame`` centred on integer pixels (ix, iy).
+
+    Pixels beyond the image edge repeat the edge (callers flag such points)."""
+    H, W = frame.shape
+    lo, hi = int(o[0]), int(o[-1])
+    rows = iy[:, None] + o
+    cols = ix[:, None] + o
+    if iy.min() + lo < 0 or iy.max() + hi > H - 1:
+        rows = np.clip(rows, 0, H - 1)
+    if ix.min() + lo < 0 or ix.max() + hi > W - 1:
+        cols = np.clip(cols, 0, W - 1)
+    flat = (rows * W)[:, :, None] + cols[:, None, :]
+    return np.take(frame, flat.reshape(len(ix), -1)).astype(np.float32)
 
 
 def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
@@ -275,55 +291,70 @@ def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
 
     sel : rows of the cache's masks to use (one per point), or None for all.
     nb : (n, 2) offset of the nearest neighbour from (ix, iy), NaN for none.
-    Returns dx, dy (offsets of the centroid from ix, iy) and the mass.
+    Returns the (n, 2) offset of the centroid from (ix, iy) and the mass.
     """
-    H, W = frame.shape
-    o = cache.o
-    rows = np.clip(iy[:, None] + o, 0, H - 1)
-    cols = np.clip(ix[:, None] + o, 0, W - 1)
-    patch = frame[rows[:, :, None], cols[:, None, :]].reshape(len(ix), -1).astype(np.float32)
-    disk = cache.disk if sel is None else cache.disk[sel]
-    ring = cache.ring if sel is None else cache.ring[sel]
+    patch = _gather(frame, ix, iy, cache.o)
+    if sel is None:
+        disk, ring = cache.disk, cache.ring
+    else:
+        disk, ring = cache.disk[sel], cache.ring[sel]
     if nb is not None:
         # Voronoi split: keep pixels nearer to this marker than to its nearest neighbour.
-        half = 0.5 * np.einsum("ij,ij->i", nb, nb)
-        far = ~np.isfinite(half)
-        if not far.all():
+        near = np.isfinite(nb[:, 0])
+        if near.any():
+            half = 0.5 * np.einsum("ij,ij->i", nb, nb)
             keep = (np.nan_to_num(nb) @ cache.gxy.T) < half[:, None]
-            keep |= far[:, None]
+            keep[~near] = True
             disk = disk * keep
             ring = ring * keep
-    nring = ring.sum(1)
-    bg = np.einsum("ij,ij->i", patch, ring) / np.maximum(nring, 1.0)
-    sub = (patch - bg[:, None]) * disk
-    sub *= sign[:, None]
-    mass = sub.sum(1)
+    bg = np.einsum("ij,ij->i", patch, ring) / np.maximum(ring.sum(1), 1.0)
+    patch -= bg[:, None]
+    patch *= disk
+    if (sign != 1).any():
+        patch *= sign[:, None]
+    mass = patch.sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        dx = (sub @ cache.gx) / mass
-        dy = (sub @ cache.gy) / mass
-    return dx, dy, mass
+        d = (patch @ cache.gxy) / mass[:, None]
+    return d, mass
 
 
 def _refine(frame, x, y, cache, sign, nbr_xy=None, iterations=2, sel=None):
-    """Iterated background-subtracted centroid; returns x, y, mass (arrays)."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    """Iterated background-subtracted centroid; returns x, y, mass (arrays).
+
+    The disk is centred on the pixel nearest the estimate; a further pass is made only
+    for the points whose nearest pixel changed.
+    """
+    x = np.array(x, dtype=np.float64)
+    y = np.array(y, dtype=np.float64)
     H, W = frame.shape
+    if sel is None:
+        sel = np.arange(len(x))
+    sign = sign[sel]
+    ix = np.rint(x).astype(np.int64)
+    iy = np.rint(y).astype(np.int64)
+    np.clip(ix, 0, W - 1, out=ix)
+    np.clip(iy, 0, H - 1, out=iy)
     mass = np.full(len(x), np.nan)
-    if sel is not None:
-        sign = sign[sel]
-    for _ in range(iterations):
-        ix = np.rint(x).astype(np.int64)
-        iy = np.rint(y).astype(np.int64)
-        np.clip(ix, 0, W - 1, out=ix)
-        np.clip(iy, 0, H - 1, out=iy)
+    todo = np.arange(len(x))
+    for it in range(iterations):
+        jx, jy = ix[todo], iy[todo]
         nb = None
         if nbr_xy is not None:
-            nb = (nbr_xy - np.stack([ix, iy], axis=1)).astype(np.float32)
-        dx, dy, mass = _centroid_pass(frame, ix, iy, cache, sel, sign, nb)
-        good = mass > 0
-        x = np.where(good, ix + dx, x)
-        y = np.where(good, iy + dy, y)
+            nb = (nbr_xy[todo] - np.column_stack([jx, jy])).astype(np.float32)
+        d, m = _centroid_pass(frame, jx, jy, cache, sel[todo], sign[todo], nb)
+        good = m > 0
+        nx = np.where(good, jx + d[:, 0], x[todo])
+        ny = np.where(good, jy + d[:, 1], y[todo])
+        x[todo], y[todo], mass[todo] = nx, ny, m
+        if it + 1 == iterations:
+            break
+        kx = np.clip(np.rint(nx).astype(np.int64), 0, W - 1)
+        ky = np.clip(np.rint(ny).astype(np.int64), 0, H - 1)
+        moved = good & ((kx != jx) | (ky != jy))
+        if not moved.any():
+            break
+        todo = todo[moved]
+        ix[todo], iy[todo] = kx[moved], ky[moved]
     return x, y, mass
 
 
@@ -474,10 +505,9 @@ def _analyse_maps(maps, shape, excl, others=()):
         runner-up search (other markers' expected positions), NaN for none.
     """
     n, m, _ = maps.shape
-    ar = np.arange(n)
     flat = maps.reshape(n, -1)
     k = flat.argmax(1)
-    score = flat[ar, k].astype(np.float64)
+    score = np.take_along_axis(flat, k[:, None], 1)[:, 0].astype(np.float64)
     v = k // m
     u = k - v * m
     rows = shape[:, 0]
@@ -488,42 +518,60 @@ def _analyse_maps(maps, shape, excl, others=()):
     pad = np.full((n, m + 1, m), -2.0, np.float32)
     pad[:, :m] = maps
     dil = cv2.dilate(pad.reshape(-1, m), _K3).reshape(n, m + 1, m)[:, :m]
-    g = np.arange(m)
+    g = _GRID[:m]
     GU = g[None, None, :]
     GV = g[None, :, None]
     ex2 = (excl * excl)[:, None, None]
-    cand = (maps >= dil) & (maps > -1.5)
-    cand &= (GU >= 1) & (GV >= 1) & (GU <= (cols - 2)[:, None, None]) & (GV <= (rows - 2)[:, None, None])
-    cand &= ((GU - u[:, None, None]) ** 2 + (GV - v[:, None, None]) ** 2) > ex2
+    # interior local maxima away from the best peak
+    cand = maps >= dil
+    cand[:, 0, :] = False
+    cand[:, :, 0] = False
+    if (rows < m).any() or (cols < m).any():
+        cand &= (GU <= (cols - 2)[:, None, None]) & (GV <= (rows - 2)[:, None, None])
+    else:
+        cand[:, m - 1, :] = False
+        cand[:, :, m - 1] = False
+    du = GU - u[:, None, None]
+    dv = GV - v[:, None, None]
+    cand &= (du * du + dv * dv) > ex2
     for o in others:
-        ou = o[:, 0][:, None, None]
-        ov = o[:, 1][:, None, None]
-        with np.errstate(invalid="ignore"):
-            near = ((GU - ou) ** 2 + (GV - ov) ** 2) <= ex2
-        cand &= ~near
+        lim = excl + m
+        use = np.isfinite(o[:, 0]) & (np.abs(o[:, 0] - m / 2) < lim) & (np.abs(o[:, 1] - m / 2) < lim)
+        if not use.any():
+            continue
+        ui = np.flatnonzero(use)
+        ou = o[ui, 0][:, None, None]
+        ov = o[ui, 1][:, None, None]
+        near = ((GU - ou) ** 2 + (GV - ov) ** 2) <= ex2[ui]
+        cand[ui] &= ~near
     second = np.where(cand, maps, -2.0).reshape(n, -1).max(1).astype(np.float64)
     return u, v, score, second, border
+
+
+_GRID = np.arange(256)
 
 
 def _nearest_two(px, py, valid):
     """Indices of the two nearest other valid points (-1 for none) and their distances."""
     n = len(px)
+    if n < 2:
+        return np.full((n, 2), -1), np.full((n, 2), np.inf), None
     dx = px[:, None] - px[None, :]
     dy = py[:, None] - py[None, :]
     d2 = dx * dx + dy * dy
-    bad = ~(valid[:, None] & valid[None, :])
-    bad |= np.eye(n, dtype=bool)
-    d2 = np.where(bad | ~np.isfinite(d2), np.inf, d2)
-    if n < 2:
-        return np.full((n, 2), -1), np.full((n, 2), np.inf), d2
+    d2[~valid] = np.inf
+    d2[:, ~valid] = np.inf
+    d2.flat[:: n + 1] = np.inf
+    np.nan_to_num(d2, copy=False, nan=np.inf)
     if n == 2:
-        j = np.argsort(d2, axis=1)[:, :2]
+        j = np.array([[1, 0], [0, 1]])
     else:
         j = np.argpartition(d2, 1, axis=1)[:, :2]
-        dd = np.take_along_axis(d2, j, 1)
-        swap = dd[:, 1] < dd[:, 0]
-        j[swap] = j[swap][:, ::-1]
     dd = np.take_along_axis(d2, j, 1)
+    swap = dd[:, 1] < dd[:, 0]
+    if swap.any():
+        j[swap] = j[swap][:, ::-1]
+        dd[swap] = dd[swap][:, ::-1]
     j = np.where(np.isfinite(dd), j, -1)
     return j, np.sqrt(dd), d2
 
@@ -570,7 +618,7 @@ _PARAM_DEFAULTS = dict(
     lost_score=0.3,
     ambiguity_margin=0.1,
     update_score=0.8,
-    refresh_below=0.97,
+    refresh_below=0.93,
     update_rate=0.5,
     original_weight=0.3,
     max_coast=6,
@@ -579,6 +627,8 @@ _PARAM_DEFAULTS = dict(
     min_mass_ratio=0.25,
     polarity="auto",
     fb_tolerance=0.5,
+    search_every=4,
+    update_every=8,
 )
 
 
@@ -608,7 +658,7 @@ class _Tracker:
     """State of one tracking pass; :meth:`step` processes one frame."""
 
     _STATE = ("hist_x", "hist_t", "nh", "sigma", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos")
+              "pos", "last_score", "stagger")
 
     def __init__(self, p, is_u8, shape):
         self.p = p
@@ -701,6 +751,9 @@ class _Tracker:
         self.tpl0 = [self._cut(frame, x[i], y[i], h[i]) for i in range(n)]
         self.tplr = [t.copy() for t in self.tpl0]
         self.tplu = [self._as_match(t) for t in self.tpl0]
+        self.last_score = np.ones(n)
+        self.stagger = np.arange(n) % p.search_every
+        self._init_stack()
         self.hist_x = np.full((n, 3, 2), np.nan)
         self.hist_x[:, 0, 0] = x
         self.hist_x[:, 0, 1] = y
@@ -758,13 +811,10 @@ class _Tracker:
         s = 2 * self.h + 1
         self.tpl0 = [np.ascontiguousarray(d["tpl0"][i, : s[i], : s[i]]) for i in range(len(s))]
         self.tplr = [np.ascontiguousarray(d["tplr"][i, : s[i], : s[i]]) for i in range(len(s))]
-        self.tplu = [self._blend(i) for i in range(len(s))]
+        self.tplu = [None] * len(s)
+        self._init_stack()
         self._set_cache()
         return self
-
-    def _blend(self, i):
-        w = self.p.original_weight
-        return self._as_match(w * self.tpl0[i] + (1.0 - w) * self.tplr[i])
 
     # ------------------------------------------------------------ prediction
     def predict(self, t):
@@ -812,143 +862,145 @@ class _Tracker:
         py = np.rint(pry)
         fits = inside & (px - h >= 0) & (py - h >= 0) & (px + h <= W - 1) & (py + h <= H - 1)
         edge = inside & ~fits
-        wide = fits & (self.nh == 1)
+        # neighbours, from one distance matrix of the predictions
+        j2, d2 = self._neighbours(prx, pry, inside)
+        jn = j2[:, 0]
+        dn = d2[:, 0]
+        merged = (dn < rb + rb[np.maximum(jn, 0)] + 1.0) & inside
+        crowded = dn < 2.0 * (h + 3)
+        # fast path: a marker moving predictably, alone, confidently matched last frame
+        # is refined at its prediction and verified, its NCC search skipped this frame
+        F = (fits & (self.nh == 3) & (gap == 1) & (self.sigma < 0.35) & (self.last_score >= 0.9)
+             & ~crowded & (self.stagger != t % p.search_every))
         r = np.clip(np.ceil(2.0 + 3.0 * self.sigma + (gap - 1)), 2, p.search_radius).astype(np.int64)
+        wide = fits & (self.nh == 1)
         r[wide] = p.search_radius
 
         X = np.full(n, np.nan)
         Y = np.full(n, np.nan)
         S = np.full(n, np.nan)
+        SEC = np.full(n, -2.0)
         XP = np.full(n, np.nan)
         YP = np.full(n, np.nan)
         ST = np.full(n, LOST, np.int8)
         RS = np.zeros(n, np.int8)
         RS[track & ~inside] = _R["out_of_frame"]
         RS[self.lostflag] = _R["lost_track"]
-        resid = np.full(n, np.nan)
+        lose = np.zeros(n, bool)
 
-        idx = np.flatnonzero(fits)
+        sidx = np.flatnonzero(fits & ~F)
+        if sidx.size:
+            self._search(frame, sidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
+            lose = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
+            XP[lose] = np.nan
+            YP[lose] = np.nan
+        fidx = np.flatnonzero(F)
+        XP[fidx] = px[fidx]
+        YP[fidx] = py[fidx]
         eidx = np.flatnonzero(edge)
-        if idx.size:
-            m = self._match(frame, idx, pred, px, py, r, wide, track)
-            mx, my, score, second = m
-            S[idx] = score
-            # joint resolution: two markers on one blob -> the one nearer its prediction keeps it
-            lose = np.zeros(idx.size, bool)
-            merged = np.zeros(n, bool)
-            if n > 1:
-                dpx = prx[:, None] - prx[None, :]
-                dpy = pry[:, None] - pry[None, :]
-                dp = np.sqrt(dpx * dpx + dpy * dpy)
-                touch = dp < (rb[:, None] + rb[None, :] + 1.0)
-                np.fill_diagonal(touch, False)
-                touch &= track[:, None] & track[None, :]
-                merged = touch.any(1)
-                dmx = mx[:, None] - mx[None, :]
-                dmy = my[:, None] - my[None, :]
-                rr = np.maximum(np.maximum(rb[idx][:, None], rb[idx][None, :]), 2.0)
-                same = np.triu((dmx * dmx + dmy * dmy) < rr * rr, 1)
-                if same.any():
-                    cost = np.hypot(mx - prx[idx], my - pry[idx]) / (self.sigma[idx] + 0.5)
-                    for a, b in zip(*np.nonzero(same)):
-                        if touch[idx[a], idx[b]]:
-                            continue
-                        lose[a if cost[a] > cost[b] else b] = True
-            keep = ~lose
-            ki = idx[keep]
-            # refine (sub-pixel) every kept match and the edge markers, jointly
-            cur_x = np.full(n, np.nan)
-            cur_y = np.full(n, np.nan)
-            cur_x[ki] = mx[keep]
-            cur_y[ki] = my[keep]
-            cur_x[eidx] = px[eidx]
-            cur_y[eidx] = py[eidx]
-            valid = np.isfinite(cur_x)
-            rsel = np.concatenate([ki, eidx])
-            nbr = self._nearest_positions(cur_x, cur_y, valid)[rsel]
-            rx, ry, mass = _refine(frame, cur_x[rsel], cur_y[rsel], self.cache, self.sign, nbr, 2, sel=rsel)
-            nk = ki.size
-            X[ki], Y[ki] = rx[:nk], ry[:nk]
-            XP[ki], YP[ki] = mx[keep], my[keep]
-            ms = np.full(idx.size, np.nan)
-            ms[keep] = mass[:nk]
-            # status of the matched markers
-            st = np.zeros(idx.size, np.int8)
-            rs = np.zeros(idx.size, np.int8)
-            res_ = np.hypot(X[idx] - prx[idx], Y[idx] - pry[idx])
-            resid[idx] = res_
-            g = gap[idx]
-            lim = np.maximum(3.0, 4.0 * self.sigma[idx] + 2.0 * (g - 1))
+        XP[eidx] = px[eidx]
+        YP[eidx] = py[eidx]
+        # sub-pixel refinement of everything that has a pixel-level position, jointly
+        ridx = np.flatnonzero(np.isfinite(XP))
+        mass = np.full(n, np.nan)
+        if ridx.size:
+            nb = self._voronoi(XP, YP, prx, pry, jn, inside)
+            X[ridx], Y[ridx], mass[ridx] = _refine(frame, XP[ridx], YP[ridx], self.cache, self.sign,
+                                                   nb[ridx], 2, sel=ridx)
+        for i in (eidx.tolist() if edge.any() else ()):
+            XP[i] = YP[i] = np.nan  # no correlation match for edge markers
+        if fidx.size:
+            # verify: NCC at the refined pixel, small residual, blob still there
+            S[fidx] = self._score_at(frame, fidx, np.rint(X[fidx]), np.rint(Y[fidx]))
+            XP[fidx] = np.rint(X[fidx])
+            YP[fidx] = np.rint(Y[fidx])
+            resf = np.hypot(X[fidx] - prx[fidx], Y[fidx] - pry[fidx])
+            bad = ~((S[fidx] >= 0.85) & (resf < np.maximum(1.0, 4.0 * self.sigma[fidx]))
+                    & (mass[fidx] > p.min_mass_ratio * self.mass0[fidx]))
+            if bad.any():
+                vidx = fidx[bad]
+                self._search(frame, vidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
+                nb = self._voronoi(XP, YP, prx, pry, jn, inside)
+                X[vidx], Y[vidx], mass[vidx] = _refine(frame, XP[vidx], YP[vidx], self.cache, self.sign,
+                                                       nb[vidx], 2, sel=vidx)
+                sidx = np.concatenate([sidx, vidx])
+                lose = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
+        # status
+        midx = np.flatnonzero(fits)
+        resid = np.hypot(X - prx, Y - pry)
+        if midx.size:
+            sc = S[midx]
+            ms = mass[midx]
+            res_ = resid[midx]
+            lim = np.maximum(3.0, 4.0 * self.sigma[midx] + 2.0 * (gap[midx] - 1))
+            lo = lose[midx]
+            st = np.zeros(midx.size, np.int8)
+            rs = np.zeros(midx.size, np.int8)
             rules = (
-                (score < p.min_score, FLAGGED, "low_score"),
-                (ms < p.min_mass_ratio * self.mass0[idx], FLAGGED, "no_signal"),
-                (second >= score - p.ambiguity_margin, FLAGGED, "ambiguous"),
-                ((self.nh[idx] >= 3) & (res_ > lim), FLAGGED, "jump"),
-                (merged[idx], FLAGGED, "merged"),
-                (lose, FLAGGED, "conflict"),
-                ((score < p.lost_score) | ~(ms > 0) & keep, LOST, "low_score"),
+                (sc < p.min_score, FLAGGED, "low_score"),
+                (ms < p.min_mass_ratio * self.mass0[midx], FLAGGED, "no_signal"),
+                (SEC[midx] >= sc - p.ambiguity_margin, FLAGGED, "ambiguous"),
+                ((self.nh[midx] >= 3) & (res_ > lim), FLAGGED, "jump"),
+                (merged[midx], FLAGGED, "merged"),
+                (lo, FLAGGED, "conflict"),
+                (((sc < p.lost_score) | ~(ms > 0)) & ~lo, LOST, "low_score"),
             )
             for cond, code, why in rules:
                 if cond.any():
                     st[cond] = code
                     rs[cond] = _R[why]
-            ST[idx] = st
-            RS[idx] = rs
-            li = idx[lose]
+            ST[midx] = st
+            RS[midx] = rs
+            li = midx[lo]
             X[li], Y[li] = prx[li], pry[li]
-            lst = idx[st == LOST]
+            lst = midx[st == LOST]
             X[lst] = np.nan
             Y[lst] = np.nan
-            # edge markers: centroid only, flagged
-            if eidx.size:
-                ex, ey, em = rx[nk:], ry[nk:], mass[nk:]
-                okm = (em > p.min_mass_ratio * self.mass0[eidx]) & (ex >= -0.5) & (ex <= W - 0.5) & (ey >= -0.5) & (ey <= H - 0.5)
-                e_ok = eidx[okm]
-                X[e_ok], Y[e_ok] = ex[okm], ey[okm]
-                ST[e_ok] = FLAGGED
-                RS[e_ok] = _R["edge"]
-                e_bad = eidx[~okm]
-                RS[e_bad] = _R["out_of_frame"]
-                X[eidx] = np.where(okm, ex, np.nan)
-                Y[eidx] = np.where(okm, ey, np.nan)
-        elif eidx.size:
-            cur_x = np.full(n, np.nan)
-            cur_y = np.full(n, np.nan)
-            cur_x[eidx], cur_y[eidx] = px[eidx], py[eidx]
-            nbr = self._nearest_positions(cur_x, cur_y, np.isfinite(cur_x))[eidx]
-            ex, ey, em = _refine(frame, px[eidx], py[eidx], self.cache, self.sign, nbr, 2, sel=eidx)
-            okm = (em > p.min_mass_ratio * self.mass0[eidx]) & (ex >= -0.5) & (ex <= W - 0.5) & (ey >= -0.5) & (ey <= H - 0.5)
-            X[eidx] = np.where(okm, ex, np.nan)
-            Y[eidx] = np.where(okm, ey, np.nan)
+        if eidx.size:
+            ex, ey = X[eidx], Y[eidx]
+            okm = ((mass[eidx] > p.min_mass_ratio * self.mass0[eidx]) & (ex >= -0.5) & (ex <= W - 0.5)
+                   & (ey >= -0.5) & (ey <= H - 0.5))
             ST[eidx[okm]] = FLAGGED
             RS[eidx[okm]] = _R["edge"]
             RS[eidx[~okm]] = _R["out_of_frame"]
+            X[eidx[~okm]] = np.nan
+            Y[eidx[~okm]] = np.nan
 
         # motion model: only reliable points feed it
-        rel = (ST == OK) | (RS == _R["edge"])
-        if rel.any():
-            ri = np.flatnonzero(rel)
+        rel = ST == OK
+        if eidx.size:
+            rel |= RS == _R["edge"]
+        ri = np.flatnonzero(rel)
+        if ri.size:
             hx, ht = self.hist_x, self.hist_t
-            upd_sigma = ri[self.nh[ri] >= 2]
-            hx[ri, 2] = hx[ri, 1]
-            hx[ri, 1] = hx[ri, 0]
-            hx[ri, 0, 0] = X[ri]
-            hx[ri, 0, 1] = Y[ri]
-            ht[ri, 2] = ht[ri, 1]
-            ht[ri, 1] = ht[ri, 0]
-            ht[ri, 0] = t
-            self.nh[ri] = np.minimum(self.nh[ri] + 1, 3)
-            if upd_sigma.size:
-                e = np.nan_to_num(resid[upd_sigma], nan=0.0)
-                self.sigma[upd_sigma] = np.sqrt(0.8 * self.sigma[upd_sigma] ** 2 + 0.2 * e * e)
+            us = ri[self.nh[ri] >= 2]
+            if ri.size == n:
+                hx[:, 1:] = hx[:, :2].copy()
+                ht[:, 1:] = ht[:, :2].copy()
+                hx[:, 0, 0] = X
+                hx[:, 0, 1] = Y
+                ht[:, 0] = t
+            else:
+                hx[ri, 2] = hx[ri, 1]
+                hx[ri, 1] = hx[ri, 0]
+                hx[ri, 0, 0] = X[ri]
+                hx[ri, 0, 1] = Y[ri]
+                ht[ri, 2] = ht[ri, 1]
+                ht[ri, 1] = ht[ri, 0]
+                ht[ri, 0] = t
+            np.minimum(self.nh + rel, 3, out=self.nh)
+            if us.size:
+                e = resid[us]
+                self.sigma[us] = np.sqrt(0.8 * self.sigma[us] ** 2 + 0.2 * e * e)
+        self.last_score = np.where(rel, np.nan_to_num(S, nan=0.0), 0.0)
         # template update: confident match whose appearance has changed
-        upd = (ST == OK) & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= 2)
+        upd = rel & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
         if upd.any():
             lam = p.update_rate
             for i in np.flatnonzero(upd).tolist():
                 cut = self._cut(frame, X[i], Y[i], h[i])
                 self.tplr[i] = (1.0 - lam) * self.tplr[i] + lam * cut
-                self.tplu[i] = self._blend(i)
+                self._set_template(i)
                 self.last_upd[i] = t
         if self.lostflag.any():
             self._reacquire(frame, t, res, direction, X, Y, S, XP, YP, ST, RS)
@@ -957,16 +1009,108 @@ class _Tracker:
         res.status[t], res.reason[t] = ST, RS
         self.pos = np.column_stack([X, Y])
 
-    def _match(self, frame, idx, pred, px, py, r, wide, track):
+    def _neighbours(self, x, y, valid):
+        """Two nearest valid other markers (indices, -1 none) and distances (inf none)."""
+        n = len(x)
+        if n < 2:
+            return np.full((n, 2), -1), np.full((n, 2), np.inf)
+        j, d, _ = _nearest_two(x, y, valid)
+        if j.shape[1] < 2:
+            j = np.column_stack([j, np.full(n, -1)])
+            d = np.column_stack([d, np.full(n, np.inf)])
+        return j, d
+
+    def _voronoi(self, XP, YP, prx, pry, jn, inside):
+        """Position of each marker's nearest neighbour for the pixel split (NaN: none near)."""
+        j = np.maximum(jn, 0)
+        nx = np.where(np.isfinite(XP[j]), XP[j], np.where(inside[j], prx[j], np.nan))
+        ny = np.where(np.isfinite(YP[j]), YP[j], np.where(inside[j], pry[j], np.nan))
+        cx = np.where(np.isfinite(XP), XP, prx)
+        cy = np.where(np.isfinite(YP), YP, pry)
+        far = (jn < 0) | ~(np.hypot(nx - cx, ny - cy) < self.reach)
+        nx[far] = np.nan
+        ny[far] = np.nan
+        return np.column_stack([nx, ny])
+
+    def _conflicts(self, sidx, XP, YP, prx, pry, merged, jn):
+        """Markers that lost a blob to another marker this frame (boolean, all markers)."""
+        n = len(XP)
+        lose = np.zeros(n, bool)
+        if sidx.size < 2 and n < 2:
+            return lose
+        valid = np.isfinite(XP)
+        vi = np.flatnonzero(valid)
+        if vi.size < 2:
+            return lose
+        dx = XP[vi][:, None] - XP[vi][None, :]
+        dy = YP[vi][:, None] - YP[vi][None, :]
+        rr = np.maximum(np.maximum(self.rb[vi][:, None], self.rb[vi][None, :]), 2.0)
+        same = np.triu((dx * dx + dy * dy) < rr * rr, 1)
+        if not same.any():
+            return lose
+        cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5)
+        for a, b in zip(*np.nonzero(same)):
+            i, j = vi[a], vi[b]
+            if merged[i] and merged[j]:
+                continue  # touching blobs: both flagged 'merged' anyway
+            lose[i if cost[i] > cost[j] else j] = True
+        return lose
+
+    def _set_template(self, i):
+        w = self.p.original_weight
+        t = w * self.tpl0[i] + (1.0 - w) * self.tplr[i]
+        self.tplu[i] = self._as_match(t)
+        self._stack_template(i, t)
+
+    def _stack_template(self, i, t):
+        s = self.tz.shape[1]
+        hi = int(self.h[i])
+        a = (s // 2) - hi
+        tt = np.asarray(t, np.float64)
+        tz = tt - tt.mean()
+        nrm = np.sqrt((tz * tz).sum())
+        self.tz[i] = 0.0
+        self.tz[i, a: a + 2 * hi + 1, a: a + 2 * hi + 1] = tz / max(nrm, 1e-12)
+
+    def _init_stack(self):
+        s = 2 * int(self.h.max()) + 1
+        n = len(self.h)
+        self.tz = np.zeros((n, s, s), np.float32)
+        self.tmask = np.zeros((n, s * s), np.float32)
+        o = np.arange(s) - s // 2
+        for i in range(n):
+            hi = int(self.h[i])
+            m = (np.abs(o)[:, None] <= hi) & (np.abs(o)[None, :] <= hi)
+            self.tmask[i] = m.ravel()
+            w = self.p.original_weight
+            t = w * self.tpl0[i] + (1.0 - w) * self.tplr[i]
+            self.tplu[i] = self._as_match(t)
+            self._stack_template(i, t)
+        self.tzf = self.tz.reshape(n, -1)
+        self.to = o
+        self.tcount = self.tmask.sum(1)
+
+    def _score_at(self, frame, idx, cx, cy):
+        """TM_CCOEFF_NORMED of each template centred at integer pixels (cx, cy)."""
+        I = _gather(frame, cx.astype(np.int64), cy.astype(np.int64), self.to)
+        m = self.tmask[idx]
+        s1 = np.einsum("ij,ij->i", I, m)
+        s2 = np.einsum("ij,ij->i", I * I, m)
+        num = np.einsum("ij,ij->i", I, self.tzf[idx])
+        var = s2 - s1 * s1 / self.tcount[idx]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sc = num / np.sqrt(np.maximum(var, 0.0))
+        return np.where(var > 1e-6 * (s2 + 1.0), sc, 0.0)
+
+    def _search(self, frame, idx, pred, px, py, r, wide, j2, XP, YP, S, SEC):
         """Windowed NCC around the predictions of markers ``idx``; wide-search consensus."""
         p = self.p
         ci = np.column_stack([px[idx], py[idx]]).astype(np.int64)
         ri = r[idx]
         tpls = self.tplu
         maps, origin, shp = match_windows(frame, [tpls[i] for i in idx], ci, ri)
-        j2, _, _ = _nearest_two(pred[:, 0], pred[:, 1], track)
         others = []
-        for k in range(j2.shape[1] if j2.ndim == 2 else 0):
+        for k in range(2):
             jj = j2[idx, k]
             o = pred[np.maximum(jj, 0)] - origin
             o[jj < 0] = np.nan
@@ -997,7 +1141,8 @@ class _Tracker:
                 q = _apply_affine(M, self.hist_x[idx[bad], 0])
                 qi = np.rint(q).astype(np.int64)
                 hb = self.h[idx[bad]]
-                okq = (qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1) & (qi[:, 1] + hb <= self.H - 1)
+                okq = ((qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1)
+                       & (qi[:, 1] + hb <= self.H - 1))
                 bad, q, qi = bad[okq], q[okq], qi[okq]
                 if bad.size:
                     cur = np.column_stack([mx, my])
@@ -1016,7 +1161,10 @@ class _Tracker:
                     my[bad] = o3[:, 1] + a[1]
                     score[bad], second[bad] = a[2], a[3]
                     pred[idx[bad]] = q
-        return mx, my, score, second
+        XP[idx] = mx
+        YP[idx] = my
+        S[idx] = score
+        SEC[idx] = second
 
     def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS):
         """Search again for long-lost markers where their reliable neighbours put them."""
@@ -1121,6 +1269,10 @@ class _Params:
         if self.polarity not in ("auto", 1, -1):
             raise ValueError(f"polarity must be 'auto', 1 (bright markers) or -1 (dark), got {self.polarity!r}")
         self.max_coast = int(self.max_coast)
+        self.search_every = int(self.search_every)
+        self.update_every = max(int(self.update_every), 1)
+        if self.search_every < 1:
+            raise ValueError(f"search_every must be >= 1 frame, got {self.search_every}")
         self.reacquire_radius = int(self.reacquire_radius)
 
     def as_dict(self):
@@ -1250,10 +1402,10 @@ def _merge_backward(fw, bw, tol):
 
 
 def track_markers(frames, picks, *, camera="left", search_radius=None, min_score=0.6,
-                  lost_score=0.3, ambiguity_margin=0.1, update_score=0.8, refresh_below=0.97,
+                  lost_score=0.3, ambiguity_margin=0.1, update_score=0.8, refresh_below=0.93,
                   update_rate=0.5, original_weight=0.3, max_coast=6, reacquire_radius=6,
                   reacquire_score=0.8, min_mass_ratio=0.25, polarity="auto",
-                  bidirectional=False, fb_tolerance=0.5, checkpoint=None,
+                  search_every=4, update_every=8, bidirectional=False, fb_tolerance=0.5, checkpoint=None,
                   checkpoint_every=500, progress=True):
     """Track markers from their frame-0 picks through a sequence, flagging doubtful points.
 
@@ -1332,8 +1484,9 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     >>> yy, xx = np.mgrid[:40, :50]
     >>> frames = np.stack([100 * (np.hypot(xx - 20 - k, yy - 18) < 4) for k in range(5)]).astype(np.uint8)
     >>> t = track_markers(frames, [[20, 18]], progress=False)
-    >>> t[["frame", "x", "y", "status"]].round(3).to_string(index=False).split("\\n")[-1]
-    '    4 24.0 18.0     ok'
+    >>> last = t[t.frame == 4].iloc[0]
+    >>> round(last.x, 3), round(last.y, 3), last.status
+    (24.0, 18.0, 'ok')
     """
     fr = _Frames(frames)
     xy, ids, half = _parse_picks(picks)
@@ -1342,7 +1495,8 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
                 refresh_below=refresh_below, update_rate=update_rate,
                 original_weight=original_weight, max_coast=max_coast,
                 reacquire_radius=reacquire_radius, reacquire_score=reacquire_score,
-                min_mass_ratio=min_mass_ratio, polarity=polarity, fb_tolerance=fb_tolerance)
+                min_mass_ratio=min_mass_ratio, polarity=polarity, fb_tolerance=fb_tolerance,
+                search_every=search_every, update_every=update_every)
     T, N = fr.n, len(xy)
     shape = fr.shape
     fw = _Results(T, N)
@@ -1428,7 +1582,9 @@ def _backward_tracker(fwd, fw, T):
     b.sigma = np.ones(n)
     b.last_upd = np.full(n, T - 1, np.int64)
     b.tplr = [t.copy() for t in fwd.tpl0]
-    b.tplu = [b._blend(i) for i in range(n)]
+    b.tplu = [None] * n
+    b.last_score = np.ones(n)
+    b._init_stack()
     for i in range(n):
         okf = np.flatnonzero(fw.status[:, i] == OK)
         tl = int(okf[-1]) if okf.size else 0
