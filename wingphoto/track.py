@@ -1485,7 +1485,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     >>> frames = np.stack([100 * (np.hypot(xx - 20 - k, yy - 18) < 4) for k in range(5)]).astype(np.uint8)
     >>> t = track_markers(frames, [[20, 18]], progress=False)
     >>> last = t[t.frame == 4].iloc[0]
-    >>> round(last.x, 3), round(last.y, 3), last.status
+    >>> float(round(last.x, 3)), float(round(last.y, 3)), last.status
     (24.0, 18.0, 'ok')
     """
     fr = _Frames(frames)
