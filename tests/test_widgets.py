@@ -344,6 +344,8 @@ def test_review_state_problems_navigation_and_correction():
     back = s2.undo()
     assert back.corrections == () and back.problems == s.problems and (back.frame, back.point) == (5, 2)
     assert ReviewState(t.iloc[:0]).next_problem().problems == ()
+    # navigation reuses the corrected tracks instead of re-applying the log
+    assert s2.goto(0).select(1).next_problem().tracks is s2.tracks
 
 
 @pytest.mark.parametrize(

@@ -940,7 +940,11 @@ class ReviewState:
     # ---------------------------------------------------------------- derived (cached)
     @functools.cached_property
     def tracks(self):
-        """The corrected tracks: :attr:`source` with :attr:`corrections` applied."""
+        """The corrected tracks: :attr:`source` with :attr:`corrections` applied.
+
+        Computed once per edit and shared by the navigation states: treat it as read-only
+        (``.copy()`` it to modify).
+        """
         return apply_corrections(self.source, self.corrections)
 
     @property
@@ -984,9 +988,17 @@ class ReviewState:
         return float(rows["x"].iloc[0]), float(rows["y"].iloc[0])
 
     # ---------------------------------------------------------------- navigation
+    def _navigate(self, **changes):
+        """Replace view fields only; the corrected tracks and problems are reused, not recomputed."""
+        new = dataclasses.replace(self, **changes)
+        for name in ("tracks", "problem_table"):
+            if name in self.__dict__:
+                new.__dict__[name] = self.__dict__[name]
+        return new
+
     def goto(self, frame):
         """Show ``frame``; ValueError outside 0..n_frames-1."""
-        return dataclasses.replace(self, frame=self._check_frame(frame))
+        return self._navigate(frame=self._check_frame(frame))
 
     def select(self, point=None, *, camera=None):
         """Select the point a click corrects and/or the camera shown."""
@@ -997,7 +1009,7 @@ class ReviewState:
             if camera not in self.cameras:
                 raise ValueError(f"camera must be one of {self.cameras}, got {camera!r}")
             changes["camera"] = camera
-        return dataclasses.replace(self, **changes)
+        return self._navigate(**changes)
 
     def next_problem(self, step=1):
         """Go to the next flagged/lost (frame, point) after the current one (wrapping).
@@ -1018,7 +1030,7 @@ class ReviewState:
         table = self.problem_table
         cams = table[(table["frame"] == target[0]) & (table["point"] == target[1])]["camera"].tolist()
         camera = self.camera if self.camera in cams else cams[0]
-        return dataclasses.replace(self, frame=target[0], point=target[1], camera=camera)
+        return self._navigate(frame=target[0], point=target[1], camera=camera)
 
     # ---------------------------------------------------------------- edits
     def correct(self, camera, point, frame, x, y):
