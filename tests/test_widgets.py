@@ -378,6 +378,10 @@ def test_apply_corrections_last_wins_and_adds_absent_rows():
     new = out.query("point == 7").iloc[0]
     assert (new.camera, new.frame, new.x, new.status) == ("right", 9, 5.0, "manual")
     assert out.dtypes.to_dict() == t.dtypes.to_dict()
+    # the tracker's extra columns follow the correction
+    t2 = t.assign(x_pix=np.round(t["x"]), y_pix=np.round(t["y"]), reason="")
+    row = apply_corrections(t2, [("left", 0, 1, 3.4, 4.6)]).query("camera == 'left' and frame == 1 and point == 0")
+    assert row[["x_pix", "y_pix"]].to_numpy().tolist() == [[3.0, 5.0]]
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".json"])

@@ -709,8 +709,10 @@ def apply_corrections(tracks, corrections):
     Returns
     -------
     tracks : pandas.DataFrame
-        A copy; corrected rows get x, y, status ``'manual'`` and score NaN (no
-        correlation score for a hand-placed position), sorted by camera, frame, point.
+        A copy; corrected rows get x, y, status ``'manual'``, score NaN (no
+        correlation score for a hand-placed position) and, when present, the tracker's
+        ``x_pix``, ``y_pix`` = the rounded position; sorted by camera, frame, point when
+        rows were added.
     """
     _check_tracks(tracks)
     corrections = [_as_correction(c) for c in corrections]
@@ -733,6 +735,9 @@ def apply_corrections(tracks, corrections):
     out.loc[rows, "status"] = "manual"
     if "score" in out.columns:
         out.loc[rows, "score"] = np.nan
+    for pix, col in (("x_pix", "x"), ("y_pix", "y")):  # the tracker's integer pixel, kept consistent
+        if pix in out.columns:
+            out.loc[rows, pix] = np.round(fix.loc[present, col].to_numpy())
     if (~present).any():
         extra = fix.loc[~present, ["camera", "frame", "point", "x", "y"]].copy()
         extra["status"] = "manual"
