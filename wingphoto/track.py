@@ -1597,3 +1597,350 @@ def _backward_tracker(fwd, fw, T):
             b.nh[i] = 2
         b.lostflag[i] = tl < T - 1 - fwd.p.max_coast
     return b
+
+
+# --------------------------------------------------------------------------- stereo
+def check_stereo(tracks_left, tracks_right, rig, *, max_epipolar_px=2.0, max_reproj_px=2.0,
+                 trusted=("ok", "manual", "interpolated")):
+    """Flag left/right pairs that are not geometrically consistent.
+
+    Parameters
+    ----------
+    tracks_left, tracks_right : pandas.DataFrame
+        Tracks of the two cameras (columns frame, point, x, y, status).
+    rig : StereoRig
+        The calibrated rig (``docs/conventions.md``).
+    max_epipolar_px : float
+        Largest symmetric epipolar distance (:meth:`StereoRig.epipolar_distance`, px, lens
+        distortion removed) of a consistent pair.
+    max_reproj_px : float
+        Largest reprojection error (px, the worse of the two views) of the pair's
+        triangulated point (:func:`wingphoto.triangulate.stereo_triangulation`).
+    trusted : tuple of str
+        Statuses whose positions are checked (both views must be trusted).
+
+    Returns
+    -------
+    tracks_left, tracks_right : pandas.DataFrame
+        Copies in which the ``ok`` rows of an inconsistent pair become ``flagged`` with
+        reason ``stereo`` (``manual`` and ``interpolated`` rows keep their status: the
+        user decided). Two columns are added: ``epipolar_px`` and ``reproj_px`` (NaN where
+        the pair was not checked).
+
+    Notes
+    -----
+    A marker swapped with another in one view (the classic tracking error) leaves the
+    pair off the epipolar geometry and is caught, unless the two markers lie on the same
+    epipolar line (within the threshold): geometry alone cannot see that swap.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> from wingphoto.camera import Camera, StereoRig
+    >>> cam = Camera(fc=[1000, 1000], cc=[255.5, 255.5])
+    >>> rig = StereoRig(cam, cam, om=[0, 0, 0], T=[-100, 0, 0])
+    >>> xL, xR = rig.project([[10.0, 5.0, 800.0], [-20.0, 30.0, 800.0]])
+    >>> tl = pd.DataFrame({"frame": 0, "point": [0, 1], "x": xL[:, 0], "y": xL[:, 1], "status": "ok"})
+    >>> tr = pd.DataFrame({"frame": 0, "point": [0, 1], "x": xR[::-1, 0], "y": xR[::-1, 1], "status": "ok"})
+    >>> l2, r2 = check_stereo(tl, tr, rig)
+    >>> l2.status.tolist(), r2.reason.tolist()
+    (['flagged', 'flagged'], ['stereo', 'stereo'])
+    """
+    from .camera import StereoRig
+    from .triangulate import reprojection_error, stereo_triangulation
+
+    if not isinstance(rig, StereoRig):
+        raise ValueError(f"rig must be a wingphoto.StereoRig, got {type(rig).__name__}")
+    for name, t in (("tracks_left", tracks_left), ("tracks_right", tracks_right)):
+        missing = [c for c in ("frame", "point", "x", "y", "status") if c not in t.columns]
+        if missing:
+            raise ValueError(f"{name} lacks columns {missing}; expected a tracks DataFrame")
+    L = tracks_left.copy()
+    R = tracks_right.copy()
+    for t in (L, R):
+        if "reason" not in t.columns:
+            t["reason"] = ""
+        t["reason"] = t["reason"].fillna("").astype(str)
+        t["epipolar_px"] = np.nan
+        t["reproj_px"] = np.nan
+    key = ["frame", "point"]
+    li = L.reset_index()[key + ["index", "x", "y", "status"]]
+    ri = R.reset_index()[key + ["index", "x", "y", "status"]]
+    m = li.merge(ri, on=key, suffixes=("_l", "_r"))
+    m = m[m["status_l"].isin(trusted) & m["status_r"].isin(trusted)]
+    xl = m[["x_l", "y_l"]].to_numpy(float)
+    xr = m[["x_r", "y_r"]].to_numpy(float)
+    fin = np.all(np.isfinite(xl), 1) & np.all(np.isfinite(xr), 1)
+    m, xl, xr = m[fin], xl[fin], xr[fin]
+    if len(m) == 0:
+        return L, R
+    epi = np.asarray(rig.epipolar_distance(xl, xr), float).reshape(-1)
+    XL, _ = stereo_triangulation(xl, xr, rig)
+    rep = reprojection_error(np.asarray(XL).reshape(-1, 3), xl, xr, rig).max(axis=1)
+    bad = ~((epi <= max_epipolar_px) & (rep <= max_reproj_px))
+    for t, col in ((L, "index_l"), (R, "index_r")):
+        idx = m[col].to_numpy()
+        t.loc[idx, "epipolar_px"] = epi
+        t.loc[idx, "reproj_px"] = rep
+        flag = idx[bad]
+        flag = flag[(t.loc[flag, "status"] == "ok").to_numpy()]
+        t.loc[flag, "status"] = "flagged"
+        t.loc[flag, "reason"] = "stereo"
+    return L, R
+
+
+# --------------------------------------------------------------------------- corrections
+CORRECTION_COLUMNS = ["point", "frame", "x", "y"]
+
+
+def _as_corrections(corrections):
+    import pandas as pd
+
+    if isinstance(corrections, pd.DataFrame):
+        c = corrections.copy()
+    else:
+        rows = list(corrections)
+        if rows and not isinstance(rows[0], dict):
+            rows = [dict(zip(CORRECTION_COLUMNS, r)) for r in rows]
+        c = pd.DataFrame(rows, columns=None if rows else CORRECTION_COLUMNS)
+    missing = [k for k in CORRECTION_COLUMNS if k not in c.columns]
+    if missing:
+        raise ValueError(f"corrections lack columns {missing}; each correction is (point, frame, x, y)")
+    c["point"] = c["point"].astype(np.int64)
+    c["frame"] = c["frame"].astype(np.int64)
+    c["x"] = c["x"].astype(np.float64)
+    c["y"] = c["y"].astype(np.float64)
+    if "camera" in c.columns:
+        c["camera"] = c["camera"].astype(str)
+    return c.reset_index(drop=True)
+
+
+def save_corrections(corrections, path):
+    """Save a corrections log (point, frame, x, y[, camera, ...]) as CSV or JSON, atomically.
+
+    Parameters
+    ----------
+    corrections : DataFrame or list of dicts / (point, frame, x, y) tuples
+        The log, in the order the corrections were made (replaying it in order gives the
+        same tracks; a later correction of the same point-frame wins).
+    path : str or Path
+        ``.csv`` or ``.json`` (records). Written via :func:`wingphoto.io.atomic_write`, so
+        an interrupted save leaves the previous file intact.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from .io import atomic_write
+
+    path = Path(path)
+    c = _as_corrections(corrections)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".json"):
+        raise ValueError(f"corrections path must end in .csv or .json, got {path.name!r}")
+    if suffix == ".csv":
+        text = c.to_csv(index=False, float_format="%.17g")
+    else:
+        recs = c.to_dict(orient="records")
+        for r in recs:
+            for k, v in r.items():
+                if isinstance(v, float) and not np.isfinite(v):
+                    r[k] = None
+                elif isinstance(v, np.generic):
+                    r[k] = v.item()
+        text = json.dumps({"corrections": recs}, indent=1)
+    with atomic_write(path, "w") as f:
+        f.write(text)
+    return path
+
+
+def load_corrections(path):
+    """Load a corrections log written by :func:`save_corrections` (CSV or JSON).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns point (int64), frame (int64), x, y (float64, NaN marks a point the user
+        declared lost), plus any extra columns saved.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"corrections file {path} does not exist")
+    if path.suffix.lower() == ".csv":
+        c = pd.read_csv(path)
+    elif path.suffix.lower() == ".json":
+        data = json.loads(path.read_text())
+        recs = data["corrections"] if isinstance(data, dict) else data
+        c = pd.DataFrame(recs, columns=None if recs else CORRECTION_COLUMNS)
+    else:
+        raise ValueError(f"corrections path must end in .csv or .json, got {path.name!r}")
+    return _as_corrections(c)
+
+
+def apply_corrections(tracks, corrections):
+    """Replay a corrections log onto tracks.
+
+    Parameters
+    ----------
+    tracks : pandas.DataFrame
+        Tracks (columns frame, point, x, y, status; ``camera`` optional).
+    corrections : DataFrame or list
+        Log of (point, frame, x, y), applied in order. A correction with NaN x, y declares
+        the point lost on that frame. With a ``camera`` column, a correction applies only
+        to the rows of that camera.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy with corrected rows: x, y replaced, status ``manual`` (``lost`` for NaN),
+        reason ``""`` (``"manual"`` for NaN), ``x_pix, y_pix`` the rounded position.
+
+    Raises
+    ------
+    ValueError
+        A correction names a (frame, point) with no row in ``tracks``.
+    """
+    c = _as_corrections(corrections)
+    t = tracks.copy()
+    if "reason" not in t.columns:
+        t["reason"] = ""
+    key = t["frame"].to_numpy(np.int64) * (1 << 32) + t["point"].to_numpy(np.int64)
+    cams = t["camera"].astype(str).to_numpy() if "camera" in t.columns else None
+    pos = {}
+    for i, (k, cam) in enumerate(zip(key, cams if cams is not None else [None] * len(key))):
+        pos.setdefault(k, []).append((i, cam))
+    cols = {name: t.columns.get_loc(name) for name in t.columns}
+    for r in c.itertuples(index=False):
+        k = int(r.frame) * (1 << 32) + int(r.point)
+        rows = pos.get(k, [])
+        cam = getattr(r, "camera", None)
+        if cam is not None and cams is not None:
+            rows = [(i, c_) for i, c_ in rows if c_ == cam]
+        if not rows:
+            raise ValueError(
+                f"correction of point {r.point} on frame {r.frame} has no row in tracks; "
+                "check the point/frame numbers (and camera)"
+            )
+        lost = not (np.isfinite(r.x) and np.isfinite(r.y))
+        for i, _ in rows:
+            t.iat[i, cols["x"]] = np.nan if lost else r.x
+            t.iat[i, cols["y"]] = np.nan if lost else r.y
+            t.iat[i, cols["status"]] = "lost" if lost else "manual"
+            t.iat[i, cols["reason"]] = "manual" if lost else ""
+            if "x_pix" in cols:
+                t.iat[i, cols["x_pix"]] = np.nan if lost else float(np.rint(r.x))
+                t.iat[i, cols["y_pix"]] = np.nan if lost else float(np.rint(r.y))
+    return t
+
+
+def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, conflict_px=3.0,
+                 progress=True, **options):
+    """Re-track some points forward from a (corrected) frame.
+
+    Parameters
+    ----------
+    frames : (T, H, W) ndarray or sequence
+        The frames the tracks were made from.
+    tracks : pandas.DataFrame
+        Tracks, typically after :func:`apply_corrections`; the positions of ``points`` on
+        ``frame`` (and on the two frames before, when trusted, for the velocity) seed the
+        re-tracking.
+    points : int or sequence of int
+        Point ids to re-track.
+    frame : int
+        Frame to start from (its rows are kept as they are).
+    camera : str, optional
+        Rows of this camera when ``tracks`` holds several.
+    stop : int, optional
+        Last frame to re-track (default: the last frame).
+    conflict_px : float
+        A re-tracked ok position closer than this to another (not re-tracked) point's ok or
+        manual position on the same frame is flagged ``conflict``.
+    **options
+        Tracking options of :func:`track_markers` (``min_score``, ``search_radius``...).
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy of ``tracks`` whose rows for ``points`` on frames ``frame + 1 .. stop`` are
+        replaced by the re-tracked ones.
+    """
+    fr = _Frames(frames)
+    pts = np.atleast_1d(np.asarray(points, dtype=np.int64))
+    t = tracks
+    if camera is not None and "camera" in t.columns:
+        t = t[t["camera"] == camera]
+    frame = int(frame)
+    stop = fr.n - 1 if stop is None else int(stop)
+    if not 0 <= frame < fr.n:
+        raise ValueError(f"frame must be in [0, {fr.n - 1}], got {frame}")
+    if not frame <= stop < fr.n:
+        raise ValueError(f"stop must be in [{frame}, {fr.n - 1}], got {stop}")
+    sel = t[(t["frame"] == frame) & t["point"].isin(pts)].drop_duplicates("point").set_index("point")
+    missing = [int(q) for q in pts if q not in sel.index]
+    if missing:
+        raise ValueError(f"tracks have no row for points {missing} on frame {frame}")
+    seed = sel.loc[pts, ["x", "y"]].to_numpy(float)
+    bad = ~np.all(np.isfinite(seed), 1)
+    if bad.any():
+        raise ValueError(
+            f"points {pts[bad].tolist()} have no position on frame {frame}; correct them first "
+            "(apply_corrections) and re-track from the corrected frame"
+        )
+    progress_opt = options.pop("progress", progress)
+    opts = {k: options.pop(k) for k in list(options) if k in _PARAM_DEFAULTS}
+    if options:
+        raise TypeError(f"unknown option(s) {sorted(options)}")
+    if "search_radius" in opts and opts["search_radius"] is None:
+        opts.pop("search_radius")
+    p = _Params(**opts)
+    tracker = _Tracker.from_picks(fr[frame], seed, np.full(len(pts), -1, np.int64), p, fr.is_u8, pts)
+    # the corrected position is the user's: keep it exactly as the seed
+    tracker.hist_x[:, 0] = seed
+    tracker.hist_t[:, 0] = frame
+    trusted = ("ok", "manual", "interpolated")
+    for k, back in ((1, 1), (2, 2)):
+        prev = t[(t["frame"] == frame - back) & t["point"].isin(pts)].drop_duplicates("point").set_index("point")
+        for i, q in enumerate(pts):
+            if (tracker.nh[i] == k and q in prev.index and prev.at[q, "status"] in trusted
+                    and np.isfinite(prev.at[q, "x"])):
+                tracker.hist_x[i, k] = (prev.at[q, "x"], prev.at[q, "y"])
+                tracker.hist_t[i, k] = frame - back
+                tracker.nh[i] = k + 1
+    res = _Results(fr.n, len(pts))
+    res.x[frame], res.y[frame] = seed[:, 0], seed[:, 1]
+    res.status[frame] = OK
+    _run_pass(fr, tracker, res, range(frame + 1, stop + 1), 1, None, progress_opt, "retrack")
+    new = _tracks_frame(res, pts, camera if camera is not None else "left")
+    new = new[(new["frame"] > frame) & (new["frame"] <= stop)]
+    out = tracks.copy()
+    if "reason" not in out.columns:
+        out["reason"] = ""
+    for c in ("x_pix", "y_pix"):
+        if c not in out.columns:
+            out[c] = np.nan
+    mask = out["point"].isin(pts) & (out["frame"] > frame) & (out["frame"] <= stop)
+    if camera is not None and "camera" in out.columns:
+        mask &= out["camera"] == camera
+    idx = out.index[mask]
+    sub = out.loc[idx, ["frame", "point"]].reset_index()
+    sub = sub.merge(new, on=["frame", "point"], how="left")
+    for c in ("x", "y", "score", "status", "x_pix", "y_pix", "reason"):
+        if c in out.columns:
+            out.loc[sub["index"].to_numpy(), c] = sub[c].to_numpy()
+    # a re-tracked point must not sit on another point
+    others = out[~out["point"].isin(pts) & out["status"].isin(("ok", "manual")) & (out["frame"] > frame)
+                 & (out["frame"] <= stop)]
+    if camera is not None and "camera" in others.columns:
+        others = others[others["camera"] == camera]
+    mine = out.loc[idx]
+    mine = mine[mine["status"] == "ok"]
+    if len(mine) and len(others):
+        m = mine.reset_index().merge(others[["frame", "x", "y"]], on="frame", suffixes=("", "_o"))
+        close = np.hypot(m["x"] - m["x_o"], m["y"] - m["y_o"]) < conflict_px
+        hit = m.loc[close, "index"].unique()
+        out.loc[hit, "status"] = "flagged"
+        out.loc[hit, "reason"] = "conflict"
+    return out
