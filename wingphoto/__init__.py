@@ -26,3 +26,15 @@ from .io import (
     write_points_csv,
     write_tracks_csv,
 )
+from .analysis import (
+    ReferenceStillness,
+    StrokeAngle,
+    find_reversals,
+    length_statistics,
+    pairwise_distance,
+    points_to_array,
+    reference_stillness,
+    stroke_angle,
+)
+from .plots3d import plot_length_statistics, plot_points_3d, plot_reference_stillness, plot_stroke_angle
+from . import widgets
