@@ -264,6 +264,10 @@ class _DiskCache:
         gy = np.repeat(o, len(o)).astype(np.float32)
         self.gx, self.gy = gx, gy
         self.gxy = np.ascontiguousarray(np.stack([gx, gy], axis=1))  # (K, 2)
+        one = np.ones_like(gx)
+        self.basis3 = np.ascontiguousarray(np.stack([one, gx, gy], axis=1))  # (K, 3)
+        self.basis6 = np.ascontiguousarray(np.stack([one, gx, gy, gx * gx, gx * gy, gy * gy], axis=1))
+        self.sym = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
         d2 = gx * gx + gy * gy
         r2 = (radii**2)[:, None]
         self.disk = (d2[None, :] <= r2).astype(np.float32)
@@ -307,8 +311,17 @@ def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
             keep[~near] = True
             disk = disk * keep
             ring = ring * keep
-    bg = np.einsum("ij,ij->i", patch, ring) / np.maximum(ring.sum(1), 1.0)
-    patch -= bg[:, None]
+    # background: a plane a + b x + c y fitted to the ring (glare is a gradient across a
+    # marker; subtracting a constant would bias the centroid up the gradient)
+    wI = ring * patch
+    mom = ring @ cache.basis6  # (n, 6): sums of w, w x, w y, w x^2, w x y, w y^2
+    rhs = wI @ cache.basis3  # (n, 3): sums of w I, w x I, w y I
+    A = mom[:, cache.sym]  # (n, 3, 3)
+    A[:, 1, 1] += 1e-3 * mom[:, 0] + 1e-6
+    A[:, 2, 2] += 1e-3 * mom[:, 0] + 1e-6
+    A[:, 0, 0] += 1e-6
+    coef = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
+    patch -= coef @ cache.basis3.T
     patch *= disk
     if (sign != 1).any():
         patch *= sign[:, None]
@@ -658,7 +671,7 @@ class _Tracker:
     """State of one tracking pass; :meth:`step` processes one frame."""
 
     _STATE = ("hist_x", "hist_t", "nh", "sigma", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos", "last_score", "stagger")
+              "pos", "last_score", "stagger", "ref_pos")
 
     def __init__(self, p, is_u8, shape):
         self.p = p
@@ -763,6 +776,7 @@ class _Tracker:
         self.lostflag = np.zeros(n, bool)
         self.last_upd = np.zeros(n, np.int64)
         self.pos = np.column_stack([x, y])
+        self.ref_pos = self.pos.copy()
         return self
 
     def _set_cache(self):
@@ -1167,41 +1181,52 @@ class _Tracker:
         SEC[idx] = second
 
     def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS):
-        """Search again for long-lost markers where their reliable neighbours put them."""
+        """Search again for long-lost markers where their reliable neighbours put them.
+
+        Each lost marker's position is predicted by a robust affine map fitted, on its six
+        nearest reliable neighbours, from the reference frame (the first frame of the pass,
+        where every marker is known) to now: a planar wing seen from afar moves by an affine
+        map, whatever the time elapsed. A blob found near the prediction is accepted only
+        if it correlates well and unambiguously, and if no other marker (tracked, or lost
+        and predicted the same way) is expected nearer to it.
+        """
         p = self.p
-        n = len(self.h)
-        okn = ST == OK
-        if okn.sum() < 1:
+        okn = np.flatnonzero(ST == OK)
+        if okn.size < 3:
             return
-        cur_valid = np.isfinite(X)
-        for i in np.flatnonzero(self.lostflag).tolist():
-            ti = int(self.hist_t[i, 0])
-            L = self.hist_x[i, 0]
-            cand = np.flatnonzero(okn & (res.status[ti] == OK))
-            cand = cand[cand != i]
-            if cand.size == 0:
-                continue
-            src = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
-            d = np.hypot(src[:, 0] - L[0], src[:, 1] - L[1])
+        ref = self.ref_pos
+        lost = np.flatnonzero(self.lostflag)
+        est_x = X.copy()
+        est_y = Y.copy()
+        q = {}
+        cur = np.column_stack([X[okn], Y[okn]])
+        for i in lost.tolist():
+            d = np.hypot(ref[okn, 0] - ref[i, 0], ref[okn, 1] - ref[i, 1])
             near = np.argsort(d)[:6]
-            cand, src = cand[near], src[near]
-            dst = np.column_stack([X[cand], Y[cand]])
-            M = _fit_affine(src, dst)
-            q = _apply_affine(M, L[None, :])[0]
-            qi = np.rint(q).astype(np.int64)
-            hh = int(self.h[i])
-            if qi[0] - hh < 0 or qi[1] - hh < 0 or qi[0] + hh > self.W - 1 or qi[1] + hh > self.H - 1:
+            M = _robust_affine(ref[okn[near]], cur[near])
+            if M is None:
                 continue
-            maps, origin, shp = match_windows(frame, [self.tplu[i]], qi[None, :], [p.reacquire_radius])
-            # cells on other markers' current positions cannot be this marker
-            oth = np.flatnonzero(cur_valid)
-            oth = oth[oth != i]
+            qi = _apply_affine(M, ref[i][None, :])[0]
+            q[i] = (qi, okn[near])
+            est_x[i], est_y[i] = qi
+        valid = np.isfinite(est_x)
+        for i, (qi, nbrs) in q.items():
+            ci = np.rint(qi).astype(np.int64)
+            hh = int(self.h[i])
+            if ci[0] - hh < 0 or ci[1] - hh < 0 or ci[0] + hh > self.W - 1 or ci[1] + hh > self.H - 1:
+                continue
+            maps, origin, shp = match_windows(frame, [self.tplu[i]], ci[None, :], [p.reacquire_radius])
+            m = maps.shape[1]
             ex = max(2.0, float(self.rb[i]))
-            g = np.arange(maps.shape[1])
-            for j in oth.tolist():
+            g = _GRID[:m]
+            # cells on other markers' current positions cannot be this marker
+            cur_valid = np.flatnonzero(np.isfinite(X))
+            for j in cur_valid.tolist():
+                if j == i:
+                    continue
                 du = X[j] - origin[0, 0]
                 dv = Y[j] - origin[0, 1]
-                if abs(du) > maps.shape[1] + ex or abs(dv) > maps.shape[1] + ex:
+                if abs(du - m / 2) > m + ex or abs(dv - m / 2) > m + ex:
                     continue
                 nearj = ((g[None, :] - du) ** 2 + (g[:, None] - dv) ** 2) <= (max(ex, float(self.rb[j])) + 1.0) ** 2
                 maps[0][nearj] = -2.0
@@ -1210,7 +1235,18 @@ class _Tracker:
             if not (sc >= p.reacquire_score and second[0] < sc - p.ambiguity_margin):
                 continue
             mx, my = float(origin[0, 0] + u[0]), float(origin[0, 1] + v[0])
+            # joint test: this marker's prediction must be the nearest to the blob
+            dq = math.hypot(mx - qi[0], my - qi[1])
+            others = valid.copy()
+            others[i] = False
+            if others.any():
+                do = np.hypot(est_x[others] - mx, est_y[others] - my).min()
+                dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
+                if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
+                    continue
             nb = None
+            oth = np.flatnonzero(np.isfinite(X))
+            oth = oth[oth != i]
             if oth.size:
                 dj = np.hypot(X[oth] - mx, Y[oth] - my)
                 k = int(np.argmin(dj))
@@ -1223,12 +1259,12 @@ class _Tracker:
             X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
             ST[i] = FLAGGED
             RS[i] = _R["reacquired"]
-            cur_valid[i] = True
+            est_x[i], est_y[i] = rx[0], ry[0]
             # restart the motion model with the neighbours' velocity
             tp = t - direction
             vel = np.zeros(2)
             if 0 <= tp < res.x.shape[0]:
-                both = cand[(res.status[tp, cand] == OK)]
+                both = nbrs[res.status[tp, nbrs] == OK]
                 if both.size:
                     vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
             self.hist_x[i] = np.nan
