@@ -713,7 +713,8 @@ class _Tracker:
             patch = f[y0:y1, x0:x1]
             border = np.concatenate([patch[:2].ravel(), patch[-2:].ravel(), patch[:, :2].ravel(), patch[:, -2:].ravel()])
             bg = float(np.median(border))
-            noise = 1.4826 * float(np.median(np.abs(border - bg))) + 1e-6 * (abs(bg) + 1)
+            dif = np.diff(patch, axis=1).ravel()
+            noise = 1.4826 * float(np.median(np.abs(dif - np.median(dif)))) / math.sqrt(2) + 1e-6 * (abs(bg) + 1)
             lx, ly = ix - x0, iy - y0
             core = patch[max(ly - 1, 0): ly + 2, max(lx - 1, 0): lx + 2]
             if p.polarity == "auto":
