@@ -57,8 +57,9 @@ class ThesisResult:
         One row per event, columns frame, point, kind, action, x_prev, y_prev, x_ncc,
         y_ncc, distance. ``kind``: ``'maxtravel'`` (the match moved more than
         ``maxtravel`` px: where ``NCC.m`` prompted for a re-crop; x_ncc, y_ncc is the
-        rejected match, ``action`` ``'stopped'``), ``'recrop'`` (a supplied correction
-        was used, ``action`` ``'corrected'``), ``'cntrd_edge'`` (``cntrd`` silently drops
+        rejected match; ``action`` ``'stopped'``, or ``'corrected'`` when a callable
+        ``corrections`` answered), ``'recrop'`` (a supplied correction was used,
+        ``action`` ``'corrected'``; x_ncc, y_ncc is the new crop centre), ``'cntrd_edge'`` (``cntrd`` silently drops
         guesses within ``1.5 * cntrd_size`` of the border) and ``'cntrd_empty'`` (the
         filtered window was all zero), both with ``action`` ``'lost_frame'``: that frame
         is lost, tracking goes on.
@@ -245,12 +246,16 @@ def track_thesis(frames, picks, *, maxtravel=8, bpass_args=(1, 10, 20), cntrd_si
         :func:`~wingphoto.centroid.bpass` parameters (thesis: 1, 10, 20).
     cntrd_size : int, optional
         :func:`~wingphoto.centroid.cntrd` window diameter, odd (thesis: 9).
-    corrections : iterable or pandas.DataFrame, optional
+    corrections : iterable, pandas.DataFrame or callable, optional
         Re-crops, as the user would have made them at the prompts:
         :class:`~wingphoto.widgets.state.Correction` ``(camera, point, frame, x, y)``
         entries (other cameras' entries are ignored), ``(point, frame, x, y)`` tuples, or a
         table with those columns. At each, the template of ``point`` is cropped anew from
         that frame around the rounded (x, y), and a stopped point resumes.
+        A callable ``corrections(frame, point) -> (x, y) or None`` plays the user at
+        ``NCC.m``'s prompts instead: it is asked at every ``'maxtravel'`` event and its
+        answer re-crops the point there (``None`` stops the point). With the ground
+        truth as the answer this counts the prompts the thesis' user had to answer.
     half_size : int or (int, int), optional
         Template half width and height for picks without their own, px (default 10:
         21 x 21 templates). Non-integers are rounded (MATLAB rounding).
@@ -326,7 +331,10 @@ def track_thesis(frames, picks, *, maxtravel=8, bpass_args=(1, 10, 20), cntrd_si
     lnoise, lobject, threshold = bpass_args
     if int(cntrd_size) != cntrd_size or cntrd_size < 1 or cntrd_size % 2 == 0:
         raise ValueError(f"cntrd_size must be a positive odd integer, got {cntrd_size}")
-    fixes = _parse_corrections(corrections, camera, n_points)
+    if callable(corrections):
+        ask, fixes = corrections, {}
+    else:
+        ask, fixes = None, _parse_corrections(corrections, camera, n_points)
 
     first = get(0)
     _check_frame(first, 0, None)
@@ -367,20 +375,24 @@ def track_thesis(frames, picks, *, maxtravel=8, bpass_args=(1, 10, 20), cntrd_si
         _check_frame(img, t, shape)
         base = t * n_points
         recropped = set()
-        # --- re-crops supplied for this frame (the user's answer to NCC.m's prompt)
-        for p, (x, y) in sorted(fixes.get(t, {}).items()):
+
+        def recrop(p, x, y, kind, what):
             px, py = int(matlab_round(x)), int(matlab_round(y))
-            tmpl = _crop(img, px, py, hw[p], hh[p], f"correction of point {p} at frame {t}")
+            tmpl = _crop(img, px, py, hw[p], hh[p], f"{what} of point {p} at frame {t}")
             if np.all(tmpl == tmpl.flat[0]):
                 raise ValueError(f"the re-cropped template of point {p} at frame {t} "
                                  f"(x={px}, y={py}) is constant")
             corr.replace(p, tmpl)
-            event(t, p, "recrop", "corrected", prev[p, 0], prev[p, 1], float(px), float(py))
+            event(t, p, kind, "corrected", prev[p, 0], prev[p, 1], float(px), float(py))
             active[p] = True
             recropped.add(p)
             prev[p] = (px, py)
             xn[base + p], yn[base + p] = px, py
             status[base + p] = "manual"
+
+        # --- re-crops supplied for this frame (the user's answer to NCC.m's prompt)
+        for p, (x, y) in sorted(fixes.get(t, {}).items()):
+            recrop(p, x, y, "recrop", "correction")
         # --- NCC.m: whole-image normxcorr2 with the fixed template
         todo = [p for p in np.flatnonzero(active) if p not in recropped]
         for p, C in corr.correlate(img, which=todo):
@@ -388,6 +400,15 @@ def track_thesis(frames, picks, *, maxtravel=8, bpass_args=(1, 10, 20), cntrd_si
             i, j, s = _peak(C)
             x, y = j - (n - 1) / 2.0, i - (m - 1) / 2.0
             if t > 0 and np.hypot(x - prev[p, 0], y - prev[p, 1]) > maxtravel:
+                # NCC.m prompts for a re-crop here
+                answer = ask(t, int(p)) if ask is not None else None
+                if answer is not None:
+                    prev_xy = prev[p].copy()
+                    recrop(p, answer[0], answer[1], "maxtravel", "answer to the prompt")
+                    # keep the rejected match in the event, as for a stopped point
+                    events[-1] = (t, p, "maxtravel", "corrected", prev_xy[0], prev_xy[1],
+                                  x, y, float(np.hypot(x - prev_xy[0], y - prev_xy[1])))
+                    continue
                 event(t, p, "maxtravel", "stopped", prev[p, 0], prev[p, 1], x, y)
                 logger.info("track_thesis: point %d moved %.1f px > maxtravel at frame %d; "
                             "NCC.m would prompt for a re-crop: point stopped", p,
