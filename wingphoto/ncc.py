@@ -189,6 +189,11 @@ class FrameCorrelator:
     def __len__(self):
         return len(self._t)
 
+    def template_shape(self, k):
+        """``(m, n)`` of template ``k``: ``C[i, j]`` puts its centre at
+        ``(x, y) = (j - (n - 1) / 2, i - (m - 1) / 2)``."""
+        return self._t[k][0].shape
+
     def replace(self, k, template):
         """Swap template ``k`` for a new one (e.g. a re-crop); sizes may change."""
         arr, _ = _as_image(template, "template")

@@ -396,7 +396,7 @@ def track_thesis(frames, picks, *, maxtravel=8, bpass_args=(1, 10, 20), cntrd_si
         # --- NCC.m: whole-image normxcorr2 with the fixed template
         todo = [p for p in np.flatnonzero(active) if p not in recropped]
         for p, C in corr.correlate(img, which=todo):
-            m, n = corr._t[p][0].shape
+            m, n = corr.template_shape(p)
             i, j, s = _peak(C)
             x, y = j - (n - 1) / 2.0, i - (m - 1) / 2.0
             if t > 0 and np.hypot(x - prev[p, 0], y - prev[p, 1]) > maxtravel:
