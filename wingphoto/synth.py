@@ -1629,3 +1629,184 @@ def render_rigid_target(
         blur_sigma=float(blur_sigma), stroke_angle_deg=np.full(n_frames, np.nan),
         pitch_angle_deg=np.full(n_frames, np.nan), params=params,
     )
+
+
+# ======================================================================= data-samples
+
+
+def _write_tiff(path, image):
+    import tifffile
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tifffile.imwrite(path, image, compression="zlib", metadata=None)
+
+
+def write_samples(out_dir, *, n_calibration=21, n_frames=60, phase_deg=-36.0, preset="clean",
+                  noise_std=0.7, pick_half_size=8, seed=0, progress=False):
+    """Write the ``data-samples/`` folder: calibration pairs, a flapping sequence, truth.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Destination folder (created; existing sample files are overwritten).
+    n_calibration : int, optional
+        Calibration pairs: the first ``n_calibration`` stops of the 3 x 7 pan-tilt
+        schedule (default all 21).
+    n_frames : int, optional
+        Frames of the flapping sequence (default 60 at 3000 fps: the end of an
+        upstroke, the top reversal at frame 10, then the downstroke).
+    phase_deg, preset : optional
+        Passed to :func:`render_flapping`.
+    noise_std : float, optional
+        Noise of the flapping sequence, grey levels (default 0.7, a little below the
+        clean preset's 1.0 so that the committed sample stays small; the calibration
+        pairs keep the default 1.0).
+    pick_half_size : int, optional
+        Half size (px) of the subimage rectangle saved with each pick.
+    seed : int, optional
+        Noise seed (the calibration set uses ``seed``, the sequence ``seed + 1``).
+    progress : bool, optional
+        Show progress bars.
+
+    Returns
+    -------
+    files : list of Path
+        Everything written.
+
+    Notes
+    -----
+    Layout (8-bit grayscale TIFF, zlib-compressed, lossless)::
+
+        rig.json                        the true rig, Bouguet names (fc_left, ..., om, T)
+        calibration/left/calib_01.tif   ... calib_21.tif, and right/ likewise
+        calibration/truth.npz           board_points, corners_left/right (K, M, 2), om, T,
+                                        angles_deg, pattern_size, square_size, noise_std
+        calibration/corners.csv         camera, image, corner, x, y (true corners, px)
+        flapping/left/frame_0000.tif    ... and right/ likewise
+        flapping/truth.npz              points3d, points_left/right, visible_left/right,
+                                        kinds, marker_diameter_mm, fps, times, angles, rig
+        flapping/truth_tracks.csv       both cameras, the tracks-table columns
+        flapping/truth_points.csv       frame, point, kind, X, Y, Z, visible_left/right
+        flapping/picks.json             frame-0 clicks (the picker's file format)
+    """
+    import tifffile  # noqa: F401  (fail early with the dependency's own message)
+
+    from .io import atomic_write
+
+    out = Path(out_dir)
+    rig = thesis_rig()
+    files = []
+
+    def text(path, content):
+        with atomic_write(path, "w", encoding="utf-8") as f:
+            f.write(content)
+        files.append(path)
+
+    def npz(path, **arrays):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path, "wb") as f:
+            np.savez_compressed(f, **arrays)
+        files.append(path)
+
+    rig_dict = rig_to_dict(rig)
+    text(out / "rig.json", json.dumps(rig_dict, indent=1) + "\n")
+
+    # ---- calibration pairs
+    cs = render_calibration_set(rig, seed=seed)
+    k = int(n_calibration)
+    if not 1 <= k <= len(cs):
+        raise ValueError(f"n_calibration must be in 1..{len(cs)}, got {n_calibration}")
+    rows = []
+    for i in range(k):
+        for side in CAMERAS:
+            p = out / "calibration" / side / f"calib_{i + 1:02d}.tif"
+            _write_tiff(p, getattr(cs, f"{side}_images")[i])
+            files.append(p)
+            c = getattr(cs, f"corners_{side}")[i]
+            rows.append(pd.DataFrame({"camera": side, "image": f"calib_{i + 1:02d}.tif",
+                                      "corner": np.arange(len(c)), "x": c[:, 0], "y": c[:, 1]}))
+    corners_csv = out / "calibration" / "corners.csv"
+    text(corners_csv, pd.concat(rows).to_csv(index=False, float_format="%.6f"))
+    files.pop()  # counted by text(); keep a single entry
+    files.append(corners_csv)
+    npz(
+        out / "calibration" / "truth.npz",
+        board_points=cs.board_points,
+        corners_left=np.stack(cs.corners_left[:k]),
+        corners_right=np.stack(cs.corners_right[:k]),
+        om=np.stack([p[0] for p in cs.poses[:k]]),
+        T=np.stack([p[1] for p in cs.poses[:k]]),
+        angles_deg=cs.angles_deg[:k],
+        pattern_size=np.array(cs.pattern_size),
+        square_size=cs.square_size,
+        noise_std=cs.noise_std,
+        blur_sigma=cs.blur_sigma,
+    )
+
+    # ---- flapping sequence
+    seq = render_flapping(rig, n_frames=n_frames, phase_deg=phase_deg, preset=preset, noise_std=noise_std,
+                          seed=seed + 1, progress=progress)
+    for i in range(len(seq)):
+        for side in CAMERAS:
+            p = out / "flapping" / side / f"frame_{i:04d}.tif"
+            _write_tiff(p, getattr(seq, side)[i])
+            files.append(p)
+    rig_arrays = {k_: np.asarray(v) for k_, v in rig_dict.items()}
+    npz(
+        out / "flapping" / "truth.npz",
+        points3d=seq.points3d, points_left=seq.points_left, points_right=seq.points_right,
+        visible_left=seq.visible_left, visible_right=seq.visible_right, kinds=seq.kinds,
+        marker_diameter_mm=seq.marker_diameter_mm, fps=seq.fps, times=seq.times,
+        stroke_angle_deg=seq.stroke_angle_deg, pitch_angle_deg=seq.pitch_angle_deg,
+        noise_std=seq.noise_std, blur_sigma=seq.blur_sigma, **rig_arrays,
+    )
+    tracks = pd.concat([seq.truth_tracks(side) for side in CAMERAS], ignore_index=True)
+    text(out / "flapping" / "truth_tracks.csv", tracks.to_csv(index=False, float_format="%.6f"))
+    pts = seq.truth_points().drop(columns="reproj_err")
+    pts.insert(2, "kind", np.tile(seq.kinds, len(seq)))
+    text(out / "flapping" / "truth_points.csv", pts.to_csv(index=False, float_format="%.6f"))
+    h = float(pick_half_size)
+    picks = {
+        side: [
+            {"point": int(i), "x": float(x), "y": float(y), "half_w": h, "half_h": h}
+            for i, (x, y) in enumerate(seq.picks(side))
+            if np.isfinite(x)
+        ]
+        for side in CAMERAS
+    }
+    picks_doc = {
+        "format": "wingphoto-picks",
+        "version": 1,
+        "cameras": list(CAMERAS),
+        "image_size": list(rig.left.image_size),
+        "image_size_right": list(rig.right.image_size),
+        "n_points": int(seq.n_points),
+        "half_size": [h, h],
+        "camera": "left",
+        "current": 0,
+        "picks": picks,
+    }
+    text(out / "flapping" / "picks.json", json.dumps(picks_doc, indent=1) + "\n")
+    log.info("wrote %d sample files to %s", len(files), out)
+    return files
+
+
+def _main(argv=None):
+    """``python -m wingphoto.synth [OUT_DIR]``: regenerate the data samples."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m wingphoto.synth",
+        description="Regenerate wingphoto's data-samples/ folder (synthetic images + ground truth).",
+    )
+    parser.add_argument("out_dir", nargs="?", default="data-samples", help="destination folder (default data-samples)")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    files = write_samples(args.out_dir, progress=True)
+    total = sum(f.stat().st_size for f in files)
+    log.info("%d files, %.1f MB", len(files), total / 1e6)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(_main())
