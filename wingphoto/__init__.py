@@ -38,3 +38,6 @@ from .analysis import (
 )
 from .plots3d import plot_length_statistics, plot_points_3d, plot_reference_stillness, plot_stroke_angle
 from . import widgets
+from .ncc import FrameCorrelator, normxcorr2
+from .centroid import CntrdResult, bpass, cntrd, matlab_round, pkfnd
+from .thesis import ThesisResult, track_thesis
