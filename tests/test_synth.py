@@ -415,6 +415,27 @@ def test_data_samples_are_what_synth_renders():
 
 
 @needs_samples
+def test_sample_manifest_points_at_existing_files():
+    manifest = json.loads((SAMPLES / "manifest.json").read_text())
+    paths = []
+
+    def walk(node):
+        for key, value in node.items():
+            if isinstance(value, dict):
+                walk(value)
+            elif key.endswith(("_dir", "_file")):
+                paths.append(SAMPLES / value)
+            elif key.endswith("_glob"):
+                assert list(SAMPLES.glob(value)), value
+
+    walk(manifest)
+    assert len(paths) > 10 and all(p.exists() for p in paths)
+    assert manifest["calibration"]["pattern_size"] == [9, 6]
+    assert manifest["flapping"]["reference_points"] == list(range(20, 26))
+    assert manifest["flapping"]["leading_edge_points"] == list(range(0, 18, 3))
+
+
+@needs_samples
 def test_sample_picks_load_in_the_picker():
     doc = json.loads((SAMPLES / "flapping" / "picks.json").read_text())
     assert doc["format"] == "wingphoto-picks" and doc["version"] == 1

@@ -835,6 +835,13 @@ class _WingModel:
 #: Wing markers: span fractions (tip to root) x chord fractions (leading to trailing edge).
 _MARKER_SIGMA = np.array([0.86, 0.72, 0.58, 0.44, 0.30, 0.16])
 _MARKER_XI = np.array([0.18, 0.50, 0.82])
+
+
+def _n_wing_markers():
+    """Number of wing markers of :func:`render_flapping` (points ``0 .. n - 1``)."""
+    return len(_MARKER_SIGMA) * len(_MARKER_XI)
+
+
 #: Their painted diameters, mm (numbered leading edge to trailing edge, tip to root).
 _MARKER_DIAMETER = np.array(
     [1.5, 1.9, 1.6, 2.1, 1.7, 2.3, 1.8, 2.4, 1.9, 2.2, 1.6, 2.4, 2.0, 1.7, 2.3, 1.4, 2.1, 1.8]
@@ -1688,6 +1695,8 @@ def write_samples(out_dir, *, n_calibration=21, n_frames=60, phase_deg=-36.0, pr
         flapping/truth_tracks.csv       both cameras, the tracks-table columns
         flapping/truth_points.csv       frame, point, kind, X, Y, Z, visible_left/right
         flapping/picks.json             frame-0 clicks (the picker's file format)
+        manifest.json                   what is where, with the settings a pipeline needs
+                                        (pattern size, square size, fps, point kinds)
     """
     import tifffile  # noqa: F401  (fail early with the dependency's own message)
 
@@ -1787,6 +1796,46 @@ def write_samples(out_dir, *, n_calibration=21, n_frames=60, phase_deg=-36.0, pr
         "picks": picks,
     }
     text(out / "flapping" / "picks.json", json.dumps(picks_doc, indent=1) + "\n")
+
+    # ---- manifest (keys ending in _dir, _file, _glob are paths relative to out_dir)
+    kinds = seq.kinds.tolist()
+    manifest = {
+        "description": "Synthetic stereo experiment rendered by wingphoto.synth.write_samples",
+        "regenerate": "python data-samples/make_samples.py",
+        "rig_file": "rig.json",
+        "calibration": {
+            "left_dir": "calibration/left",
+            "right_dir": "calibration/right",
+            "left_glob": "calibration/left/calib_*.tif",
+            "right_glob": "calibration/right/calib_*.tif",
+            "n_pairs": k,
+            "pattern_size": list(cs.pattern_size),
+            "square_size": cs.square_size,
+            "truth_file": "calibration/truth.npz",
+            "corners_file": "calibration/corners.csv",
+        },
+        "flapping": {
+            "left_dir": "flapping/left",
+            "right_dir": "flapping/right",
+            "left_glob": "flapping/left/frame_*.tif",
+            "right_glob": "flapping/right/frame_*.tif",
+            "n_frames": len(seq),
+            "fps": seq.fps,
+            "flap_hz": seq.params["flap_hz"],
+            "n_points": int(seq.n_points),
+            "kinds": kinds,
+            "wing_points": [i for i, c in enumerate(kinds) if c == "wing"],
+            "leading_edge_points": list(range(0, _n_wing_markers(), len(_MARKER_XI))),
+            "mount_points": [i for i, c in enumerate(kinds) if c == "mount"],
+            "reference_points": [i for i, c in enumerate(kinds) if c == "reference"],
+            "marker_diameter_mm": seq.marker_diameter_mm.tolist(),
+            "picks_file": "flapping/picks.json",
+            "truth_file": "flapping/truth.npz",
+            "truth_tracks_file": "flapping/truth_tracks.csv",
+            "truth_points_file": "flapping/truth_points.csv",
+        },
+    }
+    text(out / "manifest.json", json.dumps(manifest, indent=1) + "\n")
     log.info("wrote %d sample files to %s", len(files), out)
     return files
 
