@@ -133,6 +133,7 @@ REASONS = (
     "fb_disagree",
     "stereo",
     "no_signal",
+    "appearance",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
 _CHECKPOINT_VERSION = 1
@@ -630,7 +631,7 @@ _PARAM_DEFAULTS = dict(
     min_score=0.6,
     lost_score=0.3,
     ambiguity_margin=0.1,
-    update_score=0.8,
+    update_score=0.88,
     refresh_below=0.93,
     update_rate=0.5,
     original_weight=0.3,
@@ -638,10 +639,13 @@ _PARAM_DEFAULTS = dict(
     reacquire_radius=6,
     reacquire_score=0.8,
     min_mass_ratio=0.25,
+    max_mass_ratio=np.inf,
+    jump_px=3.0,
+    max_score_drop=np.inf,
     polarity="auto",
     fb_tolerance=0.5,
     search_every=4,
-    update_every=8,
+    update_every=4,
 )
 
 
@@ -671,7 +675,7 @@ class _Tracker:
     """State of one tracking pass; :meth:`step` processes one frame."""
 
     _STATE = ("hist_x", "hist_t", "nh", "sigma", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos", "last_score", "stagger", "ref_pos")
+              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref")
 
     def __init__(self, p, is_u8, shape):
         self.p = p
@@ -762,6 +766,8 @@ class _Tracker:
             )
         self.h = h
         self.mass0 = mass
+        self.mass_ref = mass.copy()
+        self.score_ref = np.ones(n)
         self.tpl0 = [self._cut(frame, x[i], y[i], h[i]) for i in range(n)]
         self.tplr = [t.copy() for t in self.tpl0]
         self.tplu = [self._as_match(t) for t in self.tpl0]
@@ -947,13 +953,15 @@ class _Tracker:
             sc = S[midx]
             ms = mass[midx]
             res_ = resid[midx]
-            lim = np.maximum(3.0, 4.0 * self.sigma[midx] + 2.0 * (gap[midx] - 1))
+            lim = np.maximum(p.jump_px, 4.0 * self.sigma[midx] + 2.0 * (gap[midx] - 1))
             lo = lose[midx]
             st = np.zeros(midx.size, np.int8)
             rs = np.zeros(midx.size, np.int8)
             rules = (
                 (sc < p.min_score, FLAGGED, "low_score"),
                 (ms < p.min_mass_ratio * self.mass0[midx], FLAGGED, "no_signal"),
+                (ms > p.max_mass_ratio * self.mass_ref[midx], FLAGGED, "merged"),
+                (sc < self.score_ref[midx] - p.max_score_drop, FLAGGED, "appearance"),
                 (SEC[midx] >= sc - p.ambiguity_margin, FLAGGED, "ambiguous"),
                 ((self.nh[midx] >= 3) & (res_ > lim), FLAGGED, "jump"),
                 (merged[midx], FLAGGED, "merged"),
@@ -1008,6 +1016,9 @@ class _Tracker:
                 e = resid[us]
                 self.sigma[us] = np.sqrt(0.8 * self.sigma[us] ** 2 + 0.2 * e * e)
         self.last_score = np.where(rel, np.nan_to_num(S, nan=0.0), 0.0)
+        okm = ST == OK
+        self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
+        self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
         # template update: confident match whose appearance has changed
         upd = rel & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
         if upd.any():
@@ -1305,6 +1316,10 @@ class _Params:
             setattr(self, k, v)
         if self.polarity not in ("auto", 1, -1):
             raise ValueError(f"polarity must be 'auto', 1 (bright markers) or -1 (dark), got {self.polarity!r}")
+        for k in ("max_mass_ratio", "max_score_drop"):
+            v = getattr(self, k)
+            setattr(self, k, np.inf if v is None else float(v))
+        self.jump_px = float(self.jump_px)
         self.max_coast = int(self.max_coast)
         self.search_every = int(self.search_every)
         self.update_every = max(int(self.update_every), 1)
@@ -1439,10 +1454,11 @@ def _merge_backward(fw, bw, tol):
 
 
 def track_markers(frames, picks, *, camera="left", search_radius=None, min_score=0.6,
-                  lost_score=0.3, ambiguity_margin=0.1, update_score=0.8, refresh_below=0.93,
-                  update_rate=0.5, original_weight=0.3, max_coast=6, reacquire_radius=6,
-                  reacquire_score=0.8, min_mass_ratio=0.25, polarity="auto",
-                  search_every=4, update_every=8, bidirectional=False, fb_tolerance=0.5, checkpoint=None,
+                  lost_score=0.3, ambiguity_margin=0.1, update_score=0.88, refresh_below=0.93,
+                  update_rate=0.5, original_weight=0.3, update_every=4, max_coast=6,
+                  reacquire_radius=6, reacquire_score=0.8, min_mass_ratio=0.25,
+                  max_mass_ratio=None, jump_px=3.0, max_score_drop=None, polarity="auto",
+                  search_every=4, bidirectional=False, fb_tolerance=0.5, checkpoint=None,
                   checkpoint_every=500, progress=True):
     """Track markers from their frame-0 picks through a sequence, flagging doubtful points.
 
@@ -1482,6 +1498,26 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     min_mass_ratio : float
         Flag ``no_signal`` when the blob's integrated brightness drops below this fraction
         of its frame-0 value.
+    max_mass_ratio : float, optional
+        Flag ``merged`` when the integrated brightness exceeds this multiple of its running
+        value (a blob that grew by merging with something). Off by default.
+    jump_px : float
+        Smallest distance (px) between refined and predicted position flagged ``jump``; the
+        limit is ``max(jump_px, 4 sigma + 2 (frames coasted))``.
+    max_score_drop : float, optional
+        Flag ``appearance`` when the correlation falls by more than this below its running
+        value in one frame: catches an *untracked* look-alike (a glare spot, an unpicked
+        marker) merging with a marker. Off by default: on wing sequences the glare sweeps
+        make it flag good points, which then coast.
+    update_every : int
+        At most one template update per marker every this many frames.
+    search_every : int
+        A marker on the fast path (moving predictably, alone, matched with score >= 0.9)
+        gets the full windowed NCC search only every ``search_every`` frames (staggered
+        across markers); in between it is refined at its prediction and verified by the
+        NCC score there (>= 0.85), the residual to the prediction and its brightness; a
+        failed verification triggers the full search on the same frame. 1 searches every
+        marker on every frame (slower).
     polarity : {"auto", 1, -1}
         Bright (1) or dark (-1) markers; "auto" decides per marker from frame 0.
     bidirectional : bool
@@ -1527,13 +1563,8 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     """
     fr = _Frames(frames)
     xy, ids, half = _parse_picks(picks)
-    p = _Params(search_radius=search_radius, min_score=min_score, lost_score=lost_score,
-                ambiguity_margin=ambiguity_margin, update_score=update_score,
-                refresh_below=refresh_below, update_rate=update_rate,
-                original_weight=original_weight, max_coast=max_coast,
-                reacquire_radius=reacquire_radius, reacquire_score=reacquire_score,
-                min_mass_ratio=min_mass_ratio, polarity=polarity, fb_tolerance=fb_tolerance,
-                search_every=search_every, update_every=update_every)
+    options = dict(locals())
+    p = _Params(**{k: options[k] for k in _PARAM_DEFAULTS})
     T, N = fr.n, len(xy)
     shape = fr.shape
     fw = _Results(T, N)
@@ -1627,11 +1658,6 @@ def _backward_tracker(fwd, fw, T):
         tl = int(okf[-1]) if okf.size else 0
         b.hist_x[i, 0] = (fw.x[tl, i], fw.y[tl, i])
         b.hist_t[i, 0] = tl
-        # seed with the forward velocity where the forward pass had it
-        if tl == T - 1 and T >= 2 and fw.status[T - 2, i] == OK:
-            b.hist_x[i, 1] = (fw.x[T - 2, i], fw.y[T - 2, i])
-            b.hist_t[i, 1] = T - 2
-            b.nh[i] = 2
         b.lostflag[i] = tl < T - 1 - fwd.p.max_coast
     return b
 
