@@ -10,6 +10,7 @@ where tracking needs a correction.
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 import cv2
@@ -57,12 +58,15 @@ def _open_writer(path, fps, size):
     else:
         tries.append((path.with_suffix(".avi"), "MJPG"))
     for p, code in tries:
-        w = cv2.VideoWriter(str(p), cv2.VideoWriter_fourcc(*code), float(fps), size)
+        tmp = p.with_name(f".{p.stem}.partial{p.suffix}")
+        w = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*code), float(fps), size)
         if w.isOpened():
             if p != path:
                 logger.warning("could not write %s with 'mp4v'; wrote MJPG to %s instead", path, p)
-            return w, p
+            return w, p, tmp
         w.release()
+        if tmp.exists():
+            tmp.unlink()
     raise ValueError(
         f"OpenCV cannot open a video writer for {path} (tried 'mp4v' and 'MJPG'); "
         "use a path ending in .mp4 or .avi in a writable folder"
@@ -83,7 +87,9 @@ def write_tracking_video(frames, tracks, path, *, fps=30, scale=2, camera=None, 
         present). Frames without rows are written unmarked.
     path : str or Path
         Output file; ``.mp4`` is written with the 'mp4v' codec. When OpenCV cannot
-        write MP4, an MJPG ``.avi`` with the same stem is written instead.
+        write MP4, an MJPG ``.avi`` with the same stem is written instead. The video is
+        written to a hidden partial file and renamed when complete, so an interrupted
+        run never replaces a good video with a truncated one.
     fps : float
         Playback frame rate (default 30: a 3000 fps sequence plays 100 x slower).
     scale : int
@@ -140,8 +146,9 @@ def write_tracking_video(frames, tracks, path, *, fps=30, scale=2, camera=None, 
         lo, hi = (float(v) for v in np.percentile(f0, [0.1, 99.9]))
     H, W = f0.shape[:2]
     size = (W * scale, H * scale)
-    writer, out = _open_writer(path, fps, size)
+    writer, out, tmp = _open_writer(path, fps, size)
     arm = max(3, 2 * scale)
+    done = False
     try:
         for k in tqdm(range(n), disable=not progress, desc="video", leave=False):
             f = np.asarray(frames[k])
@@ -167,6 +174,11 @@ def write_tracking_video(frames, tracks, path, *, fps=30, scale=2, camera=None, 
                                     cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1, cv2.LINE_AA)
             cv2.putText(img, f"frame {k}", (5, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
             writer.write(img)
+        done = True
     finally:
         writer.release()
+        if done:
+            os.replace(tmp, out)  # written completely: only now replace an older video
+        elif tmp.exists():
+            tmp.unlink()
     return out
