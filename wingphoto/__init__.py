@@ -29,6 +29,7 @@ from .io import (
 from .analysis import (
     ReferenceStillness,
     StrokeAngle,
+    align_rigid,
     find_reversals,
     length_statistics,
     pairwise_distance,

@@ -551,8 +551,9 @@ def find_reversals(angle, *, frames=None, window=5, prominence=None, min_separat
         Odd number of samples (>= 3) of the least-squares parabola fitted around each
         extremum; 3 is the classic three-point interpolation, more averages noise.
     prominence : float, optional
-        Minimum prominence (deg) of an extremum; default 20 % of the angle's range, so
-        noise wiggles are not reversals.
+        Minimum prominence (deg) of an extremum; default 5 % of the angle's range, so
+        noise wiggles are not reversals while a reversal near the start or end of a
+        short recording (whose prominence is cut by the recording's end) still counts.
     min_separation : int, optional
         Minimum number of samples between two extrema of the same kind.
 
@@ -603,7 +604,7 @@ def find_reversals(angle, *, frames=None, window=5, prominence=None, min_separat
         return empty
     filled = np.interp(np.arange(len(y)), np.flatnonzero(ok), y[ok])
     if prominence is None:
-        prominence = 0.2 * float(np.ptp(filled))
+        prominence = 0.05 * float(np.ptp(filled))
     if prominence <= 0:
         return empty
     kw = {"prominence": prominence}
@@ -622,3 +623,48 @@ def find_reversals(angle, *, frames=None, window=5, prominence=None, min_separat
         return empty
     out = pd.DataFrame(rows, columns=columns).sort_values("frame", kind="stable").reset_index(drop=True)
     return out.astype({"sample": np.int64})
+
+
+def align_rigid(source, target):
+    """Best rigid motion taking ``source`` points onto ``target`` (Kabsch / Umeyama).
+
+    Used to separate the *shape* error of a reconstruction from a rigid offset of the
+    whole scene: a stereo calibration error in the left camera's principal point moves
+    every triangulated point together, which leaves lengths and angles intact.
+
+    Parameters
+    ----------
+    source, target : (N, 3) array_like
+        Corresponding points in mm; rows with NaN in either are ignored.
+
+    Returns
+    -------
+    R : (3, 3) ndarray
+    t : (3,) ndarray
+        ``target ~ source @ R.T + t``.
+    rms : float
+        RMS distance (mm) after alignment over the finite rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> P = np.random.default_rng(0).normal(size=(10, 3))
+    >>> R, t, rms = align_rigid(P, P + [1.0, 2.0, 3.0])
+    >>> np.round(t, 9).tolist(), rms < 1e-9
+    ([1.0, 2.0, 3.0], True)
+    """
+    A = np.asarray(source, dtype=np.float64).reshape(-1, 3)
+    B = np.asarray(target, dtype=np.float64).reshape(-1, 3)
+    if A.shape != B.shape:
+        raise ValueError(f"source and target must have the same shape, got {A.shape} and {B.shape}")
+    ok = np.isfinite(A).all(axis=1) & np.isfinite(B).all(axis=1)
+    if ok.sum() < 3:
+        raise ValueError(f"align_rigid needs at least 3 finite point pairs, got {int(ok.sum())}")
+    A, B = A[ok], B[ok]
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    t = cb - R @ ca
+    rms = float(np.sqrt(np.mean(np.sum((A @ R.T + t - B) ** 2, axis=1))))
+    return R, t, rms

@@ -147,31 +147,240 @@ def triangulate_files(calib, left, right, *, out=None):
 
 
 def load_sample(data):
-    """Read the manifest of a sample folder laid out like ``data-samples/``.
+    """Check and describe a sample folder laid out like ``data-samples/``.
 
     Parameters
     ----------
     data : str or Path
-        The sample folder; it must contain ``manifest.json``.
+        Folder with ``calibration/left``, ``calibration/right`` (checkerboard pairs),
+        ``calibration/truth.npz`` (or ``board.json``) giving ``pattern_size`` and
+        ``square_size``, and ``flapping/left``, ``flapping/right`` (frames) with
+        ``flapping/picks.json``. ``rig.json`` and ``flapping/truth.npz`` (ground truth,
+        optional) let the demo report its errors.
 
     Returns
     -------
     dict
-        The manifest with every relative path resolved against ``data``.
+        Paths (``calib_left``, ``calib_right``, ``seq_left``, ``seq_right``, ``picks``),
+        ``pattern_size``, ``square_size`` and the optional truth (``rig``, ``truth``).
     """
     data = Path(data)
-    manifest = data / "manifest.json"
-    if not manifest.is_file():
+    need = {
+        "calib_left": data / "calibration" / "left",
+        "calib_right": data / "calibration" / "right",
+        "seq_left": data / "flapping" / "left",
+        "seq_right": data / "flapping" / "right",
+        "picks": data / "flapping" / "picks.json",
+    }
+    missing = [str(p) for p in need.values() if not p.exists()]
+    if missing:
         raise FileNotFoundError(
-            f"{manifest} not found: a sample folder needs a manifest.json like data-samples/ "
-            "(regenerate data-samples with `python data-samples/make_samples.py`)"
+            f"{data} is not laid out like data-samples/: missing {', '.join(missing)} "
+            "(regenerate the sample with `python data-samples/make_samples.py`)"
         )
-    m = json.loads(manifest.read_text())
+    sample = dict(need)
+    board_json = data / "calibration" / "board.json"
+    truth_npz = data / "calibration" / "truth.npz"
+    if board_json.is_file():
+        board = json.loads(board_json.read_text())
+    elif truth_npz.is_file():
+        with np.load(truth_npz) as t:
+            board = {"pattern_size": t["pattern_size"].tolist(), "square_size": float(t["square_size"])}
+    else:
+        raise FileNotFoundError(f"{board_json} not found: it must give pattern_size and square_size of the board")
+    sample["pattern_size"] = tuple(int(v) for v in board["pattern_size"])
+    sample["square_size"] = float(board["square_size"])
+    sample["rig"] = None
+    sample["truth"] = None
+    if (data / "rig.json").is_file():
+        from .synth import rig_from_dict
 
-    def resolve(node):
-        if isinstance(node, dict):
-            return {k: (str(data / v) if k.endswith(("_dir", "_file", "_glob")) and isinstance(v, str) else resolve(v))
-                    for k, v in node.items()}
-        return node
+        sample["rig"] = rig_from_dict(json.loads((data / "rig.json").read_text()))
+    if (data / "flapping" / "truth.npz").is_file():
+        with np.load(data / "flapping" / "truth.npz") as t:
+            sample["truth"] = {k: t[k] for k in t.files}
+    return sample
 
-    return resolve(m)
+
+def _save_figure(fig, path):
+    import matplotlib.pyplot as plt
+
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _calibration_vs_truth(calib, truth_rig):
+    """Table of recovered stereo parameters against the truth, in units of their 3 sigma."""
+    rows = []
+    unc = calib.uncertainty
+    for side in ("left", "right"):
+        est, true = getattr(calib.rig, side), getattr(truth_rig, side)
+        for name in ("fc", "cc"):
+            for k in range(2):
+                e, t, u = getattr(est, name)[k], getattr(true, name)[k], np.ravel(unc[f"{name}_{side}"])[k]
+                rows.append((f"{name}_{side}[{k}]", e, t, e - t, u))
+    for name in ("om", "T"):
+        for k in range(3):
+            e, t, u = getattr(calib.rig, name)[k], getattr(truth_rig, name)[k], np.ravel(unc[name])[k]
+            rows.append((f"{name}[{k}]", e, t, e - t, u))
+    df = pd.DataFrame(rows, columns=["parameter", "estimate", "truth", "error", "three_sigma"])
+    df["inside_3sigma"] = df["error"].abs() <= df["three_sigma"]
+    return df
+
+
+def run_demo(data="data-samples", *, out="results", video=True, progress=True):
+    """Run the whole pipeline on a sample folder and write ``out/``.
+
+    Stereo calibration -> tracking (both views, saved picks) -> stereo consistency check
+    -> triangulation -> analysis (reference stillness, mount-marker length statistics,
+    stroke angle and reversals) -> figures and a verification video. When the sample
+    carries ground truth (``data-samples`` does) the errors against it are reported.
+
+    Parameters
+    ----------
+    data : str or Path
+        Sample folder (see :func:`load_sample`).
+    out : str or Path
+        Output folder, created if needed; files in it are replaced atomically.
+    video : bool
+        Write ``tracking_left.mp4`` (or ``.avi``).
+
+    Returns
+    -------
+    str
+        A short human-readable summary (also written to ``out/summary.txt``).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from . import plots, plots3d
+    from .analysis import align_rigid, find_reversals, length_statistics, reference_stillness, stroke_angle
+    from .track import check_stereo
+
+    sample = load_sample(data)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = []
+
+    # 1. stereo calibration
+    calib = calibrate_folders(sample["calib_left"], sample["calib_right"], sample["pattern_size"],
+                              sample["square_size"], out=out / "Calib_Results_stereo.mat", progress=progress)
+    with atomic_write(out / "calibration_summary.txt", "w") as f:
+        f.write(calib.summary() + "\n")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    plots.plot_residuals(calib, camera="left", ax=axes[0])
+    plots.plot_residuals(calib, camera="right", ax=axes[1])
+    _save_figure(fig, out / "calibration_residuals.png")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    plots.plot_view_errors(calib, camera="left", ax=axes[0])
+    plots.plot_view_errors(calib, camera="right", ax=axes[1])
+    _save_figure(fig, out / "calibration_view_errors.png")
+    px = np.ravel(calib.pixel_error)
+    lines.append(f"calibration: {int(np.sum(calib.used))} of {len(calib.used)} pairs used, "
+                 f"pixel error {np.array2string(px, precision=4)} px, baseline {calib.rig.baseline:.2f} mm")
+    if sample["rig"] is not None:
+        cmp_ = _calibration_vs_truth(calib, sample["rig"])
+        with atomic_write(out / "calibration_vs_truth.csv", "w", newline="") as f:
+            cmp_.to_csv(f, index=False)
+        lines.append(f"  vs truth: {int(cmp_['inside_3sigma'].sum())}/{len(cmp_)} parameters inside their 3-sigma; "
+                     f"|T error| = {np.linalg.norm(calib.rig.T - sample['rig'].T):.3f} mm")
+
+    # 2. tracking, both views, from the saved picks
+    tracks = {}
+    for cam in ("left", "right"):
+        seq = read_sequence(sample[f"seq_{cam}"])
+        tracks[cam] = track_folder(seq, sample["picks"], camera=cam, checkpoint=out / f".checkpoint_{cam}.npz",
+                                   progress=progress)
+    tl, tr = check_stereo(tracks["left"], tracks["right"], calib.rig)
+    all_tracks = pd.concat([tl, tr], ignore_index=True)
+    write_tracks_csv(all_tracks, out / "tracks.csv")
+    counts = all_tracks["status"].value_counts()
+    lines.append("tracking: " + ", ".join(f"{k} {v}" for k, v in counts.items())
+                 + f" of {len(all_tracks)} point-frames")
+    truth = sample["truth"]
+    if truth is not None:
+        for cam, t in (("left", tl), ("right", tr)):
+            true_xy = truth[f"points_{cam}"][t["frame"].to_numpy(), t["point"].to_numpy()]
+            err = np.hypot(t["x"].to_numpy() - true_xy[:, 0], t["y"].to_numpy() - true_xy[:, 1])
+            ok = (t["status"] == "ok").to_numpy()
+            lines.append(f"  {cam} vs truth: RMS {np.sqrt(np.nanmean(err[ok] ** 2)):.3f} px over ok points, "
+                         f"max {np.nanmax(err[ok]):.3f} px, ok points > 1 px from truth: {int(np.sum(err[ok] > 1))}")
+
+    # 3. triangulation
+    points = triangulate_tracks(tl, tr, calib.rig)
+    write_points_csv(points, out / "points3d.csv")
+    lines.append(f"triangulation: {int(points['X'].notna().sum())} of {len(points)} point-frames, "
+                 f"median reprojection error {points['reproj_err'].median():.3f} px")
+    if truth is not None:
+        true3 = truth["points3d"][points["frame"].to_numpy(), points["point"].to_numpy()]
+        d = np.linalg.norm(points[["X", "Y", "Z"]].to_numpy() - true3, axis=1)
+        _, _, rms_shape = align_rigid(points[["X", "Y", "Z"]].to_numpy(), true3)
+        lines.append(f"  vs truth: RMS 3D error {np.sqrt(np.nanmean(d ** 2)):.3f} mm (max {np.nanmax(d):.3f} mm); "
+                     f"after removing the best rigid offset of the whole scene {rms_shape:.3f} mm")
+
+    # 4. analysis: marker roles from the sample's truth kinds when present, else the
+    # data-samples numbering (18 wing, 2 mount, 6 reference)
+    if truth is not None and "kinds" in truth:
+        kinds = np.asarray(truth["kinds"]).astype(str)
+    else:
+        kinds = np.array(["wing"] * 18 + ["mount"] * 2 + ["reference"] * 6)
+    wing = np.flatnonzero(kinds == "wing")
+    mount = np.flatnonzero(kinds == "mount")
+    refs = np.flatnonzero(kinds == "reference")
+    still = reference_stillness(points, refs.tolist())
+    with atomic_write(out / "reference_stillness.csv", "w", newline="") as f:
+        still.table.to_csv(f, index=False)
+    lines.append(f"reference stillness: max displacement {float(np.nanmax(still.table['max_displacement'])):.3f} mm "
+                 f"-> test {'valid' if still.valid else 'INVALID (references moved)'}")
+    pairs = [(int(mount[0]), int(mount[1]))] + [(int(refs[k]), int(refs[k + 1])) for k in range(len(refs) - 1)]
+    nominal = None
+    if truth is not None:
+        P = truth["points3d"][0]
+        nominal = {p: float(np.linalg.norm(P[p[0]] - P[p[1]])) for p in pairs}
+    stats = length_statistics(points, pairs)
+    if nominal is not None:
+        stats["nominal"] = [nominal[(int(i), int(j))] for i, j in zip(stats["i"], stats["j"])]
+        stats["max_error"] = np.maximum(np.abs(stats["max"] - stats["nominal"]), np.abs(stats["min"] - stats["nominal"]))
+    with atomic_write(out / "length_statistics.csv", "w", newline="") as f:
+        stats.to_csv(f, index=False)
+    lines.append("rigid lengths (mm): " + "; ".join(
+        f"{int(r.i)}-{int(r.j)} mean {r.mean:.3f} std {r.std:.3f}" for r in stats.itertuples()))
+    le = wing[::3]  # leading-edge markers, tip to root (3 per spanwise station)
+    angle = stroke_angle(points, le.tolist())
+    rev = find_reversals(angle.angle_deg)
+    lines.append(f"stroke angle: {np.nanmin(angle.angle_deg):.1f} to {np.nanmax(angle.angle_deg):.1f} deg; "
+                 f"reversals at frames {', '.join(f'{f:.2f}' for f in rev['frame'])}")
+    with atomic_write(out / "stroke_angle.csv", "w", newline="") as f:
+        pd.DataFrame({"frame": np.arange(len(angle.angle_deg)), "stroke_angle_deg": angle.angle_deg}).to_csv(f, index=False)
+
+    # 5. figures
+    frames_3d = [0, len(angle.angle_deg) // 2, len(angle.angle_deg) - 1]
+    fig = plt.figure(figsize=(6, 5))
+    ax = fig.add_subplot(projection="3d")
+    plots3d.plot_points_3d(points, frames=frames_3d, ax=ax, point_ids=wing.tolist())
+    _save_figure(fig, out / "points3d.png")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    plots3d.plot_length_statistics(stats, ax=ax)
+    _save_figure(fig, out / "length_statistics.png")
+    fig, ax = plt.subplots(figsize=(7, 4))
+    plots3d.plot_stroke_angle(angle, rev, ax=ax)
+    _save_figure(fig, out / "stroke_angle.png")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    plots3d.plot_reference_stillness(still, ax=ax)
+    _save_figure(fig, out / "reference_stillness.png")
+
+    # 6. verification video
+    if video:
+        from .video import write_tracking_video
+
+        path = write_tracking_video(read_sequence(sample["seq_left"]), tl, out / "tracking_left.mp4", progress=progress)
+        lines.append(f"video: {path}")
+    for cam in ("left", "right"):
+        (out / f".checkpoint_{cam}.npz").unlink(missing_ok=True)
+    summary = "wingphoto demo on " + str(data) + "\n" + "\n".join(lines) + f"\nresults in {out}/"
+    with atomic_write(out / "summary.txt", "w") as f:
+        f.write(summary + "\n")
+    return summary
