@@ -273,6 +273,30 @@ def test_visibility_rule_edge_on(rig):
     np.testing.assert_array_equal(seq.visible_left[:, :18][clear], expected[clear])
 
 
+def test_static_point_behind_the_wing_is_occluded(rig):
+    # visibility rule (iv): a static dot that the membrane covers is not visible, and
+    # the membrane (painted over it) hides it in the image
+    S, B = synth.scene_frame(rig)
+    dot = S + B @ np.array([0.0, 0.0, 15.0])
+    tri = S + np.array([[-15.0, -15.0, 0.0], [15.0, -15.0, 0.0], [0.0, 15.0, 0.0]]) @ B.T
+    level = 40.0
+    scene = synth._Scene(
+        points=lambda t: (np.vstack([dot, S + B @ [40.0, 0.0, 15.0]]), np.tile(-B[:, 2], (2, 1))),
+        diameters=np.array([2.5, 2.5]), static=np.array([True, True]), paint=200.0, light=-B[:, 2],
+        membrane=lambda t: (tri, np.array([[0, 1, 2]]), -B[:, 2]), membrane_level=level,
+    )
+    imgs, _, pts2d, vis = synth._render_sequence(
+        rig, scene, np.zeros(1), fps=1.0, blur_sigma=0.0, noise_std=0.0, dtype=np.float32,
+        rng=np.random.default_rng(0), motion_blur=False, exposure=0.0, supersample=4,
+        edge_on_deg=72.0, merge_gap_px=1.5)
+    for side in ("left", "right"):
+        assert vis[side][0].tolist() == [False, True]
+        x, y = np.rint(pts2d[side][0, 0]).astype(int)
+        assert imgs[side][0, y, x] < level + 1  # the dot is hidden
+        x, y = np.rint(pts2d[side][0, 1]).astype(int)
+        assert imgs[side][0, y, x] > 150  # the uncovered dot shows
+
+
 def test_motion_blur_centroid_is_the_mid_exposure_position(hard, rig):
     seq = synth.render_flapping(rig, n_frames=3, preset="hard", phase_deg=78.0, glare=False, noise_std=0.0,
                                 membrane_level=synth.LEVELS["background"], dtype=np.float32)

@@ -855,18 +855,20 @@ _WING_HINGE = np.array([-26.0, 0.0, 0.0])  # relative to the scene origin
 def _reference_layout():
     """Scene coordinates of the 6 static reference dots on the background panel.
 
-    The panel lies 25 mm behind the wing's hinge plane; the dots were placed where,
-    in both views, they stay at least 30 px from anything the wing sweeps (110 deg
-    stroke, 70 deg pitch) and 25 px from the image border.
+    The panel lies 15 mm behind the wing's hinge plane. The dots (top left, top right,
+    middle left, middle right, bottom left, bottom right) were placed where, in both
+    views of the nominal rig, they stay at least 29 px from anything the wing sweeps
+    (110 deg stroke, 60 deg pitch) and about 48 px from the image border, so that they
+    stay in view for perturbed rigs (``thesis_rig(jitter=1)``) too.
     """
     return np.array(
         [
-            [-46.0, -48.0, 25.0],
-            [46.0, -48.0, 25.0],
-            [-46.0, -14.0, 25.0],
-            [46.0, 12.0, 25.0],
-            [-46.0, 46.0, 25.0],
-            [46.0, 50.0, 25.0],
+            [-44.0, -44.0, 15.0],
+            [44.0, -42.0, 15.0],
+            [-44.0, -10.0, 15.0],
+            [44.0, 8.0, 15.0],
+            [-44.0, 40.0, 15.0],
+            [44.0, 44.0, 15.0],
         ]
     )
 
@@ -1413,7 +1415,7 @@ def render_flapping(
     angle. With ``th = 2 pi flap_hz t + phase``: stroke ``-A/2 cos(th)`` (negative =
     up), pitch ``pitch_deg sin(th)``, camber ``camber sin(th)``, tip bending
     ``bend_mm sin(th - 20 deg)``. The mount markers sit on the body behind the hinge;
-    the reference dots on a black panel 25 mm behind the stroke plane.
+    the reference dots on a black panel 15 mm behind the stroke plane.
 
     **Rendering.** Markers are flat white discs on the wing's tangent plane at their
     centre, so they foreshorten as the wing turns (see ``_disc_coverage``); their
