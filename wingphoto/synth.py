@@ -397,7 +397,10 @@ def _board_colour(u, v, wu, wv, nx, ny, border):
         # (the pattern's outline is anti-aliased by ``inside`` below)
         k = np.clip(np.rint(t), 0, n - 1)
         ramp = np.minimum(np.abs(t - k) / half, np.float32(1.0))
-        odd = (np.floor(t).astype(np.int32) & 1).astype(np.float32)
+        # parity of the square, clamped inside the pattern so that it does not flip on
+        # the outline (where the outline's own coverage ramp takes over)
+        tc = np.clip(t, -0.999, n - 0.001)
+        odd = (np.floor(tc).astype(np.int32) & 1).astype(np.float32)
         return ramp * (np.float32(1.0) - np.float32(2.0) * odd)
 
     def inside(t, lo, hi, half):
