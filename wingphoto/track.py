@@ -109,13 +109,15 @@ __all__ = [
     "load_corrections",
     "retrack_from",
     "write_tracking_video",
-    "TRACK_COLUMNS",
+    "TRACKER_COLUMNS",
     "REASONS",
 ]
 
 logger = logging.getLogger(__name__)
 
-TRACK_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status", "x_pix", "y_pix", "reason"]
+#: Columns of :func:`track_markers`' result: :data:`wingphoto.io.TRACK_COLUMNS` plus the
+#: pixel-level match and the reason of a flag.
+TRACKER_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status", "x_pix", "y_pix", "reason"]
 STATUS = ("ok", "flagged", "lost", "manual")
 OK, FLAGGED, LOST, MANUAL = 0, 1, 2, 3
 #: Reasons a point is flagged or lost (the ``reason`` column; "" when ok).
