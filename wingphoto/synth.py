@@ -45,19 +45,19 @@ for a seed.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 
 import cv2
 import numpy as np
 import pandas as pd
 
-from .camera import Camera, StereoRig, rodrigues, rodrigues_inverse
+from .camera import Camera, StereoRig, rodrigues_inverse
 
 __all__ = [
     "CalibrationSet",
@@ -77,15 +77,15 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 IMAGE_SIZE = (512, 512)
-#: Grey levels (8-bit scale) of the rendered scenes.
-LEVELS = {
+#: Grey levels (8-bit scale) of the rendered scenes (read-only).
+LEVELS = MappingProxyType({
     "board_black": 35.0,
     "board_white": 215.0,
     "board_surround": 80.0,
     "background": 6.0,
     "membrane": 30.0,
     "paint": 235.0,
-}
+})
 CAMERAS = ("left", "right")
 
 
@@ -260,33 +260,15 @@ def _pixel_rays(key):
     return grid
 
 
-def _rays_at(camera, x, y):
-    """Normalised undistorted rays of arbitrary pixel positions (bilinear between centres).
-
-    ``x``, ``y`` must lie in [-1, W] x [-1, H]; returns ``(xn, yn)`` arrays of their shape.
-    The undistortion is smooth, so bilinear interpolation between exact pixel-centre
-    values errs by < 1e-8 in normalised units (< 1e-4 px).
-    """
-    grid = _pixel_rays(_camera_key(camera))
-    hp, wp = grid.shape[:2]
-    gx = np.clip(x + 1.0, 0.0, wp - 1.000001)
-    gy = np.clip(y + 1.0, 0.0, hp - 1.000001)
-    ix = np.floor(gx).astype(np.intp)
-    iy = np.floor(gy).astype(np.intp)
-    fx = gx - ix
-    fy = gy - iy
-    out = []
-    for ch in range(2):
-        g = grid[..., ch]
-        top = g[iy, ix] * (1 - fx) + g[iy, ix + 1] * fx
-        bot = g[iy + 1, ix] * (1 - fx) + g[iy + 1, ix + 1] * fx
-        out.append(top * (1 - fy) + bot * fy)
-    return out[0], out[1]
-
-
 @functools.lru_cache(maxsize=4)
 def _supersample_rays(key, ss):
-    """Full-image supersampled rays ``(H*ss, W*ss, 2)`` float32 (for the checkerboard)."""
+    """Undistorted rays of every supersample of the image: ``(H*ss, W*ss, 2)`` float32.
+
+    Sample ``(i, j)`` sits at pixel ``((j + 0.5) / ss - 0.5, (i + 0.5) / ss - 0.5)``.
+    The toolbox's undistortion (:meth:`Camera.normalize`) is evaluated exactly at the
+    pixel centres and interpolated bilinearly between them; the undistortion is smooth,
+    so this errs by < 1e-7 in normalised units (< 1e-4 px). Cached per camera and ``ss``.
+    """
     w, h = key[4]
     padded = _pixel_rays(key).astype(np.float32)  # pixel centres -1 .. w
     # cv2.resize (bilinear) samples the source at (c + 0.5) / ss - 0.5: exactly the
@@ -711,7 +693,7 @@ def _disc_coverage(camera, centers, normals, radii, *, ss=4, geometry=None):
 
     Notes
     -----
-    Each sample's viewing ray (undistorted, see :func:`_rays_at`) is intersected with
+    Each sample's viewing ray (undistorted, see :func:`_supersample_rays`) is intersected with
     the disc's plane; the sample's coverage ramps linearly from 1 to 0 across the rim
     over the size of one sample measured along the radial direction in the disc plane
     (``(1/ss) / |J u_r|`` mm), an unbiased estimate of the covered fraction. Discs are
