@@ -275,6 +275,9 @@ class _DiskCache:
         r2 = (radii**2)[:, None]
         self.disk = (d2[None, :] <= r2).astype(np.float32)
         self.ring = ((d2[None, :] > r2) & (d2[None, :] <= (radii[:, None] + 2.0) ** 2)).astype(np.float32)
+        self.ring_diag = self.ring @ np.stack([one, gx * gx, gy * gy], axis=1)
+        self.ring_diag[:, 1:] += 1e-3 * self.ring_diag[:, :1] + 1e-6
+        self.ring_diag[:, 0] += 1e-6
 
 
 def _gather(frame, ix, iy, o):
@@ -305,25 +308,30 @@ def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
         disk, ring = cache.disk, cache.ring
     else:
         disk, ring = cache.disk[sel], cache.ring[sel]
+    near = None
     if nb is not None:
         # Voronoi split: keep pixels nearer to this marker than to its nearest neighbour.
         near = np.isfinite(nb[:, 0])
         if near.any():
             half = 0.5 * np.einsum("ij,ij->i", nb, nb)
-            keep = (np.nan_to_num(nb) @ cache.gxy.T) < half[:, None]
+            keep = (np.where(near[:, None], nb, 0.0) @ cache.gxy.T) < half[:, None]
             keep[~near] = True
             disk = disk * keep
             ring = ring * keep
     # background: a plane a + b x + c y fitted to the ring (glare is a gradient across a
     # marker; subtracting a constant would bias the centroid up the gradient)
     wI = ring * patch
-    mom = ring @ cache.basis6  # (n, 6): sums of w, w x, w y, w x^2, w x y, w y^2
     rhs = wI @ cache.basis3  # (n, 3): sums of w I, w x I, w y I
-    A = mom[:, cache.sym]  # (n, 3, 3)
-    A[:, 1, 1] += 1e-3 * mom[:, 0] + 1e-6
-    A[:, 2, 2] += 1e-3 * mom[:, 0] + 1e-6
-    A[:, 0, 0] += 1e-6
-    coef = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
+    if near is None or not near.any():
+        # a full ring is symmetric about its centre: the normal equations are diagonal
+        coef = rhs / cache.ring_diag if sel is None else rhs / cache.ring_diag[sel]
+    else:
+        mom = ring @ cache.basis6  # (n, 6): sums of w, w x, w y, w x^2, w x y, w y^2
+        A = mom[:, cache.sym]  # (n, 3, 3)
+        A[:, 1, 1] += 1e-3 * mom[:, 0] + 1e-6
+        A[:, 2, 2] += 1e-3 * mom[:, 0] + 1e-6
+        A[:, 0, 0] += 1e-6
+        coef = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
     patch -= coef @ cache.basis3.T
     patch *= disk
     if (sign != 1).any():
@@ -572,24 +580,25 @@ def _nearest_two(px, py, valid):
     n = len(px)
     if n < 2:
         return np.full((n, 2), -1), np.full((n, 2), np.inf), None
-    dx = px[:, None] - px[None, :]
-    dy = py[:, None] - py[None, :]
+    ok = valid & np.isfinite(px) & np.isfinite(py)
+    x = np.where(ok, px, 0.0)
+    y = np.where(ok, py, 0.0)
+    dx = x[:, None] - x
+    dy = y[:, None] - y
     d2 = dx * dx + dy * dy
-    d2[~valid] = np.inf
-    d2[:, ~valid] = np.inf
-    d2.flat[:: n + 1] = np.inf
-    np.nan_to_num(d2, copy=False, nan=np.inf)
-    if n == 2:
-        j = np.array([[1, 0], [0, 1]])
-    else:
-        j = np.argpartition(d2, 1, axis=1)[:, :2]
-    dd = np.take_along_axis(d2, j, 1)
-    swap = dd[:, 1] < dd[:, 0]
-    if swap.any():
-        j[swap] = j[swap][:, ::-1]
-        dd[swap] = dd[swap][:, ::-1]
-    j = np.where(np.isfinite(dd), j, -1)
-    return j, np.sqrt(dd), d2
+    bad = ~(ok[:, None] & ok)
+    bad.flat[:: n + 1] = True
+    d2[bad] = np.inf
+    ar = np.arange(n)
+    j0 = d2.argmin(1)
+    d0 = d2[ar, j0]
+    saved = d0.copy()
+    d2[ar, j0] = np.inf
+    j1 = d2.argmin(1)
+    d1 = d2[ar, j1]
+    d2[ar, j0] = saved
+    j = np.column_stack([np.where(np.isfinite(d0), j0, -1), np.where(np.isfinite(d1), j1, -1)])
+    return j, np.sqrt(np.column_stack([d0, d1])), d2
 
 
 def _fit_affine(src, dst):
@@ -890,7 +899,7 @@ class _Tracker:
         jn = j2[:, 0]
         dn = d2[:, 0]
         merged = (dn < rb + rb[np.maximum(jn, 0)] + 1.0) & inside
-        crowded = dn < 2.0 * (h + 3)
+        crowded = dn < rb + rb[np.maximum(jn, 0)] + 4.0
         # fast path: a marker moving predictably, alone, confidently matched last frame
         # is refined at its prediction and verified, its NCC search skipped this frame
         F = (fits & (self.nh == 3) & (gap == 1) & (self.sigma < 0.35) & (self.last_score >= 0.9)
@@ -1017,7 +1026,7 @@ class _Tracker:
             if us.size:
                 e = resid[us]
                 self.sigma[us] = np.sqrt(0.8 * self.sigma[us] ** 2 + 0.2 * e * e)
-        self.last_score = np.where(rel, np.nan_to_num(S, nan=0.0), 0.0)
+        self.last_score = np.where(rel & np.isfinite(S), S, 0.0)
         okm = ST == OK
         self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
         self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
@@ -1055,30 +1064,35 @@ class _Tracker:
         ny = np.where(np.isfinite(YP[j]), YP[j], np.where(inside[j], pry[j], np.nan))
         cx = np.where(np.isfinite(XP), XP, prx)
         cy = np.where(np.isfinite(YP), YP, pry)
-        far = (jn < 0) | ~(np.hypot(nx - cx, ny - cy) < self.reach)
+        # the neighbour matters when its blob can reach this marker's disk or ring
+        reach = self.cache.radii + 3.0 + self.rb[j]
+        far = (jn < 0) | ~(np.hypot(nx - cx, ny - cy) < reach)
         nx[far] = np.nan
         ny[far] = np.nan
         return np.column_stack([nx, ny])
 
     def _conflicts(self, sidx, XP, YP, prx, pry, merged, jn):
-        """Markers that lost a blob to another marker this frame (boolean, all markers)."""
+        """Markers that lost a blob to another marker this frame (boolean, all markers).
+
+        Only a searched marker can land on another's blob (a fast-path marker stays within
+        a pixel of its own prediction), so searched markers are tested against all.
+        """
         n = len(XP)
         lose = np.zeros(n, bool)
-        if sidx.size < 2 and n < 2:
+        si = sidx[np.isfinite(XP[sidx])]
+        vi = np.flatnonzero(np.isfinite(XP))
+        if si.size == 0 or vi.size < 2:
             return lose
-        valid = np.isfinite(XP)
-        vi = np.flatnonzero(valid)
-        if vi.size < 2:
-            return lose
-        dx = XP[vi][:, None] - XP[vi][None, :]
-        dy = YP[vi][:, None] - YP[vi][None, :]
-        rr = np.maximum(np.maximum(self.rb[vi][:, None], self.rb[vi][None, :]), 2.0)
-        same = np.triu((dx * dx + dy * dy) < rr * rr, 1)
+        dx = XP[si][:, None] - XP[vi]
+        dy = YP[si][:, None] - YP[vi]
+        rr = np.maximum(np.maximum(self.rb[si][:, None], self.rb[vi]), 2.0)
+        same = (dx * dx + dy * dy) < rr * rr
+        same &= si[:, None] != vi
         if not same.any():
             return lose
         cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5)
         for a, b in zip(*np.nonzero(same)):
-            i, j = vi[a], vi[b]
+            i, j = si[a], vi[b]
             if merged[i] and merged[j]:
                 continue  # touching blobs: both flagged 'merged' anyway
             lose[i if cost[i] > cost[j] else j] = True
