@@ -42,3 +42,4 @@ from . import widgets
 from .ncc import FrameCorrelator, normxcorr2
 from .centroid import CntrdResult, bpass, cntrd, matlab_round, pkfnd
 from .thesis import ThesisResult, track_thesis
+from . import synth
