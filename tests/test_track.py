@@ -467,8 +467,8 @@ def test_bad_input_messages():
     with pytest.raises(ValueError, match=r"template of point 0 \(201 px, half_size 100\) is larger than the 190x150"):
         track_markers(frames, pd.DataFrame({"x": [picks[0, 0]], "y": [picks[0, 1]], "half_size": [100]}),
                       progress=False)
-    with pytest.raises(ValueError, match=r"picks of points \[1\] are NaN"):
-        track_markers(frames, [picks[0], [np.nan, 3.0]], progress=False)
+    with pytest.raises(ValueError, match="picks are all NaN"):
+        track_markers(frames, [[np.nan, 3.0]], progress=False)
     with pytest.raises(ValueError, match="frames is empty"):
         track_markers(frames[:0], picks, progress=False)
     with pytest.raises(ValueError, match="got one 2D image"):
@@ -484,6 +484,21 @@ def test_bad_input_messages():
         track_markers(frames, np.zeros((0, 2)), progress=False)
     with pytest.raises(ValueError, match="got a path"):
         track_markers("frames/", picks, progress=False)
+
+
+def test_nan_pick_gives_a_lost_point(caplog):
+    """A marker not visible in frame 0 has no click: its rows are lost, the others tracked."""
+    frames, truth, _ = moving_discs(15, T=8, N=3)
+    picks = np.rint(truth[0])
+    picks[1] = np.nan
+    with caplog.at_level("WARNING", logger="wingphoto.track"):
+        tr = track_markers(frames, picks, progress=False)
+    assert "picks of points [1] are NaN" in caplog.text
+    assert tr.point.unique().tolist() == [0, 1, 2] and len(tr) == 8 * 3
+    p1 = tr[tr.point == 1]
+    assert (p1.status == "lost").all() and (p1.reason == "no_pick").all() and p1.x.isna().all()
+    err, status = errors(tr, truth)
+    assert (status[:, [0, 2]] == "ok").all() and err[:, [0, 2]].max() < 0.2
 
 
 def test_sixteen_bit_frames_use_the_full_range():

@@ -136,6 +136,7 @@ REASONS = (
     "stereo",
     "no_signal",
     "appearance",
+    "no_pick",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
 _CHECKPOINT_VERSION = 1
@@ -239,11 +240,8 @@ def _parse_picks(picks):
     if len(xy) == 0:
         raise ValueError("picks is empty: click at least one marker")
     bad = ~np.all(np.isfinite(xy), axis=1)
-    if bad.any():
-        raise ValueError(
-            f"picks of points {ids[bad].tolist()} are NaN; every marker needs a frame-0 click "
-            "(drop those rows or click them)"
-        )
+    if bad.all():
+        raise ValueError("picks are all NaN: click at least one marker in frame 0")
     if len(np.unique(ids)) != len(ids):
         raise ValueError("picks has duplicate point ids; each point must be picked once")
     if half is None:
@@ -280,20 +278,27 @@ class _DiskCache:
         self.ring_diag[:, 0] += 1e-6
 
 
+_OFFSETS = {}
+
+
 def _gather(frame, ix, iy, o):
     """(n, len(o)**2) float32 patches of ``frame`` centred on integer pixels (ix, iy).
 
     Pixels beyond the image edge repeat the edge (callers flag such points)."""
     H, W = frame.shape
     lo, hi = int(o[0]), int(o[-1])
-    rows = iy[:, None] + o
-    cols = ix[:, None] + o
-    if iy.min() + lo < 0 or iy.max() + hi > H - 1:
-        rows = np.clip(rows, 0, H - 1)
-    if ix.min() + lo < 0 or ix.max() + hi > W - 1:
-        cols = np.clip(cols, 0, W - 1)
-    flat = (rows * W)[:, :, None] + cols[:, None, :]
-    return np.take(frame, flat.reshape(len(ix), -1)).astype(np.float32)
+    n = len(ix)
+    if iy.min() + lo < 0 or iy.max() + hi > H - 1 or ix.min() + lo < 0 or ix.max() + hi > W - 1:
+        rows = np.clip(iy[:, None] + o, 0, H - 1)
+        cols = np.clip(ix[:, None] + o, 0, W - 1)
+        flat = ((rows * W)[:, :, None] + cols[:, None, :]).reshape(n, -1)
+    else:
+        key = (W, lo, hi)
+        off = _OFFSETS.get(key)
+        if off is None:
+            off = _OFFSETS[key] = (o[:, None] * W + o[None, :]).ravel()
+        flat = (iy * W + ix)[:, None] + off
+    return np.take(frame, flat).astype(np.float32)
 
 
 def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
@@ -971,8 +976,10 @@ class _Tracker:
             rules = (
                 (sc < p.min_score, FLAGGED, "low_score"),
                 (ms < p.min_mass_ratio * self.mass0[midx], FLAGGED, "no_signal"),
-                (ms > p.max_mass_ratio * self.mass_ref[midx], FLAGGED, "merged"),
-                (sc < self.score_ref[midx] - p.max_score_drop, FLAGGED, "appearance"),
+                (np.isfinite(p.max_mass_ratio) and ms > p.max_mass_ratio * self.mass_ref[midx], FLAGGED,
+                 "merged"),
+                (np.isfinite(p.max_score_drop) and sc < self.score_ref[midx] - p.max_score_drop, FLAGGED,
+                 "appearance"),
                 (SEC[midx] >= sc - p.ambiguity_margin, FLAGGED, "ambiguous"),
                 ((self.nh[midx] >= 3) & (res_ > lim), FLAGGED, "jump"),
                 (merged[midx], FLAGGED, "merged"),
@@ -980,7 +987,7 @@ class _Tracker:
                 (((sc < p.lost_score) | ~(ms > 0)) & ~lo, LOST, "low_score"),
             )
             for cond, code, why in rules:
-                if cond.any():
+                if cond is not False and cond.any():
                     st[cond] = code
                     rs[cond] = _R[why]
             ST[midx] = st
@@ -1349,7 +1356,7 @@ class _Params:
 
 def _fingerprint(fr, xy, ids, half, params, camera, bidirectional):
     hsh = hashlib.sha1()
-    hsh.update(np.ascontiguousarray(xy).tobytes())
+    hsh.update(np.nan_to_num(np.ascontiguousarray(xy), nan=-1e300).tobytes())
     hsh.update(np.ascontiguousarray(ids).tobytes())
     hsh.update(np.ascontiguousarray(half).tobytes())
     hsh.update(json.dumps([params.as_dict(), camera, bool(bidirectional), fr.n, list(fr.shape), str(fr.dtype)],
@@ -1489,6 +1496,8 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         top-left pixel; rounding to the pixel is fine), the template size then chosen from
         the blob; or the picker's saved picks with columns ``point, x, y`` and optionally
         ``half_size`` (template half width, px) or ``rect`` (``(x0, y0, width, height)``).
+        A NaN pick (a marker not visible in frame 0) gives that point ``lost`` rows with
+        reason ``no_pick`` (and a logged warning).
     camera : str
         Value of the ``camera`` column.
     search_radius : int, optional
@@ -1578,7 +1587,12 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     (24.0, 18.0, 'ok')
     """
     fr = _Frames(frames)
-    xy, ids, half = _parse_picks(picks)
+    xy_all, ids_all, half_all = _parse_picks(picks)
+    active = np.all(np.isfinite(xy_all), axis=1)
+    if not active.all():
+        logger.warning("picks of points %s are NaN: those points are reported lost (reason 'no_pick')",
+                       ids_all[~active].tolist())
+    xy, ids, half = xy_all[active], ids_all[active], half_all[active]
     options = dict(locals())
     p = _Params(**{k: options[k] for k in _PARAM_DEFAULTS})
     T, N = fr.n, len(xy)
@@ -1649,8 +1663,20 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         for k in _Results.names + ("status", "reason"):
             getattr(fw2, k)[...] = getattr(fw, k)
         _merge_backward(fw2, bw, p.fb_tolerance)
-        return _tracks_frame(fw2, ids, camera)
-    return _tracks_frame(fw, ids, camera)
+        return _tracks_frame(_expand(fw2, active), ids_all, camera)
+    return _tracks_frame(_expand(fw, active), ids_all, camera)
+
+
+def _expand(res, active):
+    """Results of the picked points, with lost rows ('no_pick') for points without a pick."""
+    if active.all():
+        return res
+    T = res.x.shape[0]
+    out = _Results(T, len(active))
+    for k in _Results.names + ("status", "reason"):
+        getattr(out, k)[:, active] = getattr(res, k)
+    out.reason[:, ~active] = _R["no_pick"]
+    return out
 
 
 def _backward_tracker(fwd, fw, T):
