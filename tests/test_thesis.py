@@ -243,15 +243,16 @@ def flapping(request):
     return request.param, synth.render_flapping(n_frames=12, preset=request.param, seed=0)
 
 
-def _check_against_truth(res, seq):
+def _check_against_truth(res, seq, rms_bound=0.45):
     truth, vis = seq.points_left, seq.visible_left
     err, status = _errors(res, truth)
     ok = status == "ok"
     assert ok.any()
     assert err[ok].max() < 1.0  # no confident error: every ok point within 1 px of truth
     # bpass(1, 10, 20) + cntrd(sz 9) around ceil(match) is biased by ~0.3 px on 6-11 px
-    # markers (the mask is offset by half a pixel and cuts the marker): the thesis' floor
-    assert np.sqrt(np.mean(err[ok] ** 2)) < 0.45
+    # markers (the mask is offset by half a pixel and cuts the marker): the thesis' floor;
+    # glare and motion blur of the hard preset add ~0.1-0.15 px to it
+    assert np.sqrt(np.mean(err[ok] ** 2)) < rms_bound
     assert not (ok & ~vis).any()
     return err, status
 
@@ -259,7 +260,7 @@ def _check_against_truth(res, seq):
 def test_flapping_baseline_stops_points_at_prompts(flapping):
     preset, seq = flapping
     res = track_thesis(seq.left, seq.picks("left"), progress=False)
-    err, status = _check_against_truth(res, seq)
+    err, status = _check_against_truth(res, seq, rms_bound=0.45 if preset == "clean" else 0.6)
     # every point that is lost was stopped at a recorded prompt, and stays lost
     stops = res.events.query("kind == 'maxtravel'")
     assert (stops["action"] == "stopped").all()
@@ -285,7 +286,7 @@ def test_flapping_baseline_with_a_user_answering_prompts(flapping):
         return tuple(truth[frame, point]) if vis[frame, point] else None
 
     res = track_thesis(seq.left, seq.picks("left"), corrections=user, progress=False)
-    err, status = _check_against_truth(res, seq)
+    err, status = _check_against_truth(res, seq, rms_bound=0.45 if preset == "clean" else 0.6)
     prompts = res.events.query("kind == 'maxtravel'")
     assert len(prompts) == len(asked) > 0
     assert (status == "manual").sum() == (prompts["action"] == "corrected").sum()
