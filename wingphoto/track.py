@@ -137,6 +137,7 @@ REASONS = (
     "no_signal",
     "appearance",
     "no_pick",
+    "pick_moved",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
 _CHECKPOINT_VERSION = 1
@@ -626,7 +627,8 @@ def _apply_affine(M, p):
     return p @ M[:, :2].T + M[:, 2]
 
 
-def _robust_affine(src, dst, iters=3, tol=2.0):
+def _robust_affine(src, dst, iters=3, tol=2.0, quality=False):
+    """Affine src -> dst with outlier rejection; optionally also the inliers' RMS residual."""
     keep = np.ones(len(src), bool)
     M = None
     for _ in range(iters):
@@ -638,7 +640,13 @@ def _robust_affine(src, dst, iters=3, tol=2.0):
         if new.sum() < min(3, len(src)) or np.array_equal(new, keep):
             break
         keep = new
-    return M
+    if not quality:
+        return M
+    if M is None:
+        return None, np.inf, 0
+    res = np.linalg.norm(_apply_affine(M, src[keep]) - dst[keep], axis=1)
+    rms = float(np.sqrt(np.mean(res**2))) if keep.sum() > 3 else (0.0 if keep.sum() == 3 else np.inf)
+    return M, rms, int(keep.sum())
 
 
 # --------------------------------------------------------------------------- tracker
@@ -1181,39 +1189,75 @@ class _Tracker:
         my = (origin[:, 1] + v).astype(np.float64)
         wsel = wide[idx]
         if wsel.any():
-            amb = (second >= score - p.ambiguity_margin) | (score < p.min_score)
-            good = wsel & ~amb
-            bad = np.flatnonzero(wsel & amb)
-            if good.any() and bad.size:
-                src = self.hist_x[idx[good], 0]
-                M = _robust_affine(src, np.column_stack([mx[good], my[good]]))
-                q = _apply_affine(M, self.hist_x[idx[bad], 0])
-                qi = np.rint(q).astype(np.int64)
-                hb = self.h[idx[bad]]
-                okq = ((qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1)
-                       & (qi[:, 1] + hb <= self.H - 1))
-                bad, q, qi = bad[okq], q[okq], qi[okq]
-                if bad.size:
-                    cur = np.column_stack([mx, my])
-                    cur[bad] = q
-                    j3, _, _ = _nearest_two(cur[:, 0], cur[:, 1], np.ones(len(cur), bool))
-                    r3 = np.full(bad.size, 4)
-                    m3, o3, s3 = match_windows(frame, [tpls[i] for i in idx[bad]], qi, r3)
-                    oth3 = []
-                    for k in range(j3.shape[1]):
-                        jj = j3[bad, k]
-                        o = cur[np.maximum(jj, 0)] - o3
-                        o[jj < 0] = np.nan
-                        oth3.append(o)
-                    a = _analyse_maps(m3, s3, excl[bad], oth3)
-                    mx[bad] = o3[:, 0] + a[0]
-                    my[bad] = o3[:, 1] + a[1]
-                    score[bad], second[bad] = a[2], a[3]
-                    pred[idx[bad]] = q
+            self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl)
         XP[idx] = mx
         YP[idx] = my
         S[idx] = score
         SEC[idx] = second
+
+    def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
+        """Check wide-search matches (no velocity yet) against the wing's local motion.
+
+        Each wide-searched marker's position is predicted by a robust affine map fitted,
+        on its six nearest anchors, from the reference frame to now; anchors are the other
+        markers with a motion model (at their predictions) and the wide-searched markers
+        whose match is unambiguous. A match further than 3 px from that prediction, or
+        ambiguous, is replaced by a search of radius 4 around the prediction. Prevents a
+        marker starting (or restarting) on its neighbour's blob when its own is dim.
+        """
+        p = self.p
+        n = len(self.h)
+        ref = self.ref_pos
+        ax = np.full(n, np.nan)
+        ay = np.full(n, np.nan)
+        tracked = (self.nh >= 2) & ~self.lostflag
+        ax[tracked], ay[tracked] = pred[tracked, 0], pred[tracked, 1]
+        amb = (second >= score - p.ambiguity_margin) | (score < p.min_score)
+        good = wsel & ~amb
+        ax[idx[good]], ay[idx[good]] = mx[good], my[good]
+        anchors = np.flatnonzero(np.isfinite(ax))
+        redo, qs = [], []
+        for k in np.flatnonzero(wsel).tolist():
+            i = idx[k]
+            cand = anchors[anchors != i]
+            if cand.size < 3:
+                continue
+            d = np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1])
+            near = cand[np.argsort(d)[:6]]
+            M, rms, nin = _robust_affine(ref[near], np.column_stack([ax[near], ay[near]]), quality=True)
+            if M is None or nin < 4 or rms > 1.5:
+                continue  # the neighbours do not move together: no prediction to trust
+            q = _apply_affine(M, ref[i][None, :])[0]
+            if good[k] and math.hypot(mx[k] - q[0], my[k] - q[1]) <= 3.0:
+                continue
+            redo.append(k)
+            qs.append(q)
+        if not redo:
+            return
+        redo = np.array(redo)
+        q = np.array(qs)
+        qi = np.rint(q).astype(np.int64)
+        hb = self.h[idx[redo]]
+        okq = ((qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1)
+               & (qi[:, 1] + hb <= self.H - 1))
+        redo, q, qi = redo[okq], q[okq], qi[okq]
+        if not redo.size:
+            return
+        cur = np.column_stack([ax, ay])
+        cur[idx[redo]] = q
+        j3, _, _ = _nearest_two(cur[:, 0], cur[:, 1], np.isfinite(cur[:, 0]))
+        m3, o3, s3 = match_windows(frame, [self.tplu[i] for i in idx[redo]], qi, np.full(redo.size, 4))
+        oth3 = []
+        for k in range(2):
+            jj = j3[idx[redo], k]
+            o = cur[np.maximum(jj, 0)] - o3
+            o[jj < 0] = np.nan
+            oth3.append(o)
+        a = _analyse_maps(m3, s3, excl[redo], oth3)
+        mx[redo] = o3[:, 0] + a[0]
+        my[redo] = o3[:, 1] + a[1]
+        score[redo], second[redo] = a[2], a[3]
+        pred[idx[redo]] = q
 
     def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS):
         """Search again for long-lost markers where their reliable neighbours put them.
@@ -1238,9 +1282,9 @@ class _Tracker:
         for i in lost.tolist():
             d = np.hypot(ref[okn, 0] - ref[i, 0], ref[okn, 1] - ref[i, 1])
             near = np.argsort(d)[:6]
-            M = _robust_affine(ref[okn[near]], cur[near])
-            if M is None:
-                continue
+            M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
+            if M is None or nin < 4 or rms > 1.5:
+                continue  # the neighbours do not move together: no prediction to trust
             qi = _apply_affine(M, ref[i][None, :])[0]
             q[i] = (qi, okn[near])
             est_x[i], est_y[i] = qi
@@ -1622,6 +1666,11 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         fw.xpix[0], fw.ypix[0] = np.rint(tracker.pos[:, 0]), np.rint(tracker.pos[:, 1])
         fw.score[0] = 1.0
         fw.status[0] = OK
+        # a click is within ~0.7 px of a marker's centre: a refinement that moved further
+        # was pulled by something (an unpicked neighbour, glare)
+        moved = np.hypot(tracker.pos[:, 0] - xy[:, 0], tracker.pos[:, 1] - xy[:, 1]) > 1.5
+        fw.status[0, moved] = FLAGGED
+        fw.reason[0, moved] = _R["pick_moved"]
         box.update(phase="forward", next=1, tracker=tracker)
     else:
         meta, arrays = resumed
