@@ -24,6 +24,8 @@ __all__ = [
     "stroke_angle",
     "StrokeAngle",
     "find_reversals",
+    "align_rigid",
+    "tracking_error",
 ]
 
 logger = logging.getLogger(__name__)
@@ -668,3 +670,30 @@ def align_rigid(source, target):
     t = cb - R @ ca
     rms = float(np.sqrt(np.mean(np.sum((A @ R.T + t - B) ** 2, axis=1))))
     return R, t, rms
+
+
+def tracking_error(tracks, truth):
+    """Attach the true position and the error to every tracked point.
+
+    Parameters
+    ----------
+    tracks : pandas.DataFrame
+        Tracks (camera, frame, point, x, y, status, ...), one or both cameras.
+    truth : pandas.DataFrame
+        True tracks in the same layout (``StereoSequence.truth_tracks``,
+        ``data-samples/flapping/truth_tracks.csv``); NaN where the marker is not visible.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``tracks`` with ``x_true``, ``y_true`` and ``error_px`` (Euclidean, px; NaN where
+        either position is missing) appended.
+    """
+    key = ["camera", "frame", "point"] if "camera" in tracks.columns and "camera" in truth.columns else ["frame", "point"]
+    missing = [c for c in key + ["x", "y"] if c not in truth.columns]
+    if missing:
+        raise ValueError(f"truth lacks columns {missing}; expected a tracks-layout table")
+    true = truth[key + ["x", "y"]].rename(columns={"x": "x_true", "y": "y_true"})
+    out = tracks.merge(true, on=key, how="left")
+    out["error_px"] = np.hypot(out["x"] - out["x_true"], out["y"] - out["y_true"])
+    return out

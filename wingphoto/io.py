@@ -44,6 +44,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = [
     "atomic_write",
+    "find_samples",
     # image sequences
     "IMAGE_EXTENSIONS",
     "Sequence",
@@ -1543,3 +1544,35 @@ def read_points_csv(path):
         Not a CSV, a required column is missing, or frame/point are not whole numbers.
     """
     return _read_table(path, _POINT_KINDS, "points")
+
+
+def find_samples(start=None, name="data-samples"):
+    """Find the ``data-samples/`` folder from ``start`` or any of its parents.
+
+    Notebooks run with their own folder as the working directory (nbmake, Jupyter) and
+    scripts from the repository root; this finds the sample data from either.
+
+    Parameters
+    ----------
+    start : str or Path, optional
+        Where to start looking (default: the current working directory).
+    name : str
+        Folder name to look for.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    FileNotFoundError
+        When no parent holds the folder.
+    """
+    start = Path.cwd() if start is None else Path(start)
+    for folder in (start, *start.resolve().parents):
+        if (folder / name).is_dir():
+            return folder / name
+    raise FileNotFoundError(
+        f"no {name}/ folder in {start} or its parents; run from inside the wingphoto repository "
+        "or regenerate the sample with `python data-samples/make_samples.py`"
+    )

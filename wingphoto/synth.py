@@ -72,6 +72,7 @@ __all__ = [
     "write_samples",
     "rig_to_dict",
     "rig_from_dict",
+    "load_rig",
 ]
 
 log = logging.getLogger(__name__)
@@ -233,6 +234,36 @@ def rig_from_dict(d):
         for s in CAMERAS
     ]
     return StereoRig(cams[0], cams[1], om=d["om"], T=d["T"])
+
+
+def load_rig(path):
+    """Read a rig saved as JSON under the Bouguet names (``data-samples/rig.json``).
+
+    Parameters
+    ----------
+    path : str or Path
+        JSON file written by :func:`write_samples` (see :func:`rig_to_dict`).
+
+    Returns
+    -------
+    StereoRig
+
+    Raises
+    ------
+    FileNotFoundError
+        When ``path`` does not exist.
+    ValueError
+        When the file is not valid JSON or lacks a Bouguet name.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"rig file {path} not found")
+    try:
+        return rig_from_dict(json.loads(path.read_text()))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"rig file {path} is not valid JSON: {exc}") from None
+    except KeyError as exc:
+        raise ValueError(f"rig file {path} lacks {exc.args[0]!r}; expected the Bouguet names fc_left, cc_left, ...") from None
 
 
 # ====================================================================== ray machinery
