@@ -1323,6 +1323,13 @@ class _Tracker:
                 dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
                 if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
                     continue
+                # and no uncertain marker (flagged, or lost) may be near: the blob could
+                # be its own, and a wrong re-acquisition would be confident from then on
+                unsure = others & (ST != OK)
+                if unsure.any():
+                    block = 2.5 * (self.rb[i] + 1.0) + dq
+                    if np.hypot(est_x[unsure] - mx, est_y[unsure] - my).min() < block:
+                        continue
             nb = None
             oth = np.flatnonzero(np.isfinite(X))
             oth = oth[oth != i]
