@@ -1,0 +1,154 @@
+"""Diagnostic figures: every function takes ax=None and returns the axes it drew on."""
+import functools
+
+import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from wingphoto.calibrate import board_points, calibrate_camera, calibrate_stereo, find_corners
+from wingphoto.camera import Camera, StereoRig, rodrigues
+from wingphoto.plots import plot_corners, plot_coverage, plot_residuals, plot_view_errors
+
+PATTERN = (9, 6)
+SIZE = (400, 300)  # non-square, catches x/y swaps
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def _poses(n, rng):
+    centre = np.array([4 * 30.0, 2.5 * 30.0, 0.0])
+    out = []
+    for _ in range(n):
+        om = np.concatenate([rng.uniform(-0.35, 0.35, 2), rng.uniform(-0.2, 0.2, 1)])
+        R = rodrigues(om)
+        out.append((R, np.array([rng.uniform(-20, 20), rng.uniform(-15, 15), 900.0]) - R @ centre))
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def _mono():
+    """Six views, 0.1 px noise; view 'img3.png' has 1.5 px errors."""
+    rng = np.random.default_rng(0)
+    cam = Camera(fc=[700, 705], cc=[199.5, 149.5], kc=[-0.1, 0.05, 0, 0, 0], image_size=SIZE)
+    X = board_points(PATTERN, 30.0)
+    corners = []
+    for k, (R, T) in enumerate(_poses(6, rng)):
+        c = cam.project(X @ R.T + T) + rng.normal(0, 0.1, (54, 2))
+        if k == 3:
+            c = c + rng.normal(0, 1.5, (54, 2))
+        corners.append(c)
+    corners[1][:5] = np.nan  # missing corners
+    return calibrate_camera(corners, PATTERN, 30.0, image_size=SIZE, names=[f"img{i}.png" for i in range(6)])
+
+
+@functools.lru_cache(maxsize=None)
+def _stereo():
+    rng = np.random.default_rng(1)
+    left = Camera(fc=[700, 700], cc=[199.5, 149.5], image_size=SIZE)
+    right = Camera(fc=[710, 708], cc=[205, 150], image_size=SIZE)
+    rig = StereoRig(left, right, om=[0.0, 0.2, 0.0], T=[-150.0, 0.0, 15.0])
+    X = board_points(PATTERN, 30.0)
+    cl, cr = [], []
+    for R, T in _poses(5, rng):
+        xl, xr = rig.project(X @ R.T + T)
+        cl.append(xl + rng.normal(0, 0.1, xl.shape))
+        cr.append(xr + rng.normal(0, 0.1, xr.shape))
+    return calibrate_stereo(cl, cr, PATTERN, 30.0, image_size=SIZE, estimate_tangential=False)
+
+
+def test_plot_residuals_one_colour_per_used_view():
+    cal = _mono()
+    ax = plot_residuals(cal)
+    assert isinstance(ax, matplotlib.axes.Axes)
+    assert len(ax.collections) == int(cal.used.sum()) == 6
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == list(cal.views)
+    # the scatter is the residuals, observed - projected, missing corners left out
+    off = np.ma.getdata(ax.collections[1].get_offsets())
+    np.testing.assert_allclose(off[np.isfinite(off[:, 0])], cal.residuals[1][5:])
+    colours = {tuple(np.round(c.get_facecolor()[0], 6)) for c in ax.collections}
+    assert len(colours) == 6
+    assert "Reprojection error" in ax.get_title()
+
+
+def test_plot_residuals_draws_on_the_given_axes_and_picks_the_camera():
+    st = _stereo()
+    fig, (a, b) = plt.subplots(1, 2)
+    assert plot_residuals(st, camera="left", ax=a) is a
+    assert plot_residuals(st, camera="right", ax=b) is b
+    np.testing.assert_allclose(np.ma.getdata(b.collections[0].get_offsets()), st.residuals_right[0])
+    assert "right camera" in b.get_title()
+    with pytest.raises(ValueError, match="camera must be 'left' or 'right'"):
+        plot_residuals(st, camera="middle")
+    with pytest.raises(ValueError, match="must be a CameraCalibration or StereoCalibration"):
+        plot_residuals(object())
+
+
+def test_plot_view_errors_names_the_worst_view():
+    cal = _mono()
+    ax = plot_view_errors(cal, worst=1)
+    bars = ax.patches
+    assert len(bars) == 6
+    heights = np.array([b.get_height() for b in bars])
+    np.testing.assert_allclose(heights, cal.view_errors)
+    assert int(np.argmax(heights)) == 3
+    notes = [t.get_text() for t in ax.texts]
+    assert notes == ["img3.png"]
+    red = matplotlib.colors.to_rgba("tab:red")
+    assert bars[3].get_facecolor() == red and bars[0].get_facecolor() != red  # suggest_suppress
+    assert [t.get_text() for t in ax.get_xticklabels()] == list(cal.views)
+
+
+def test_plot_view_errors_stereo_shows_both_cameras():
+    st = _stereo()
+    ax = plot_view_errors(st)
+    assert len(ax.patches) == 2 * len(st.pairs)
+    heights = np.array([b.get_height() for b in ax.patches]).reshape(2, -1).T
+    np.testing.assert_allclose(heights, st.view_errors)
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["left", "right"]
+    assert len(plot_view_errors(st, camera="right").patches) == len(st.pairs)
+
+
+def test_plot_coverage_shows_every_used_corner_in_the_image_frame():
+    cal = _mono()
+    ax = plot_coverage(cal)
+    pts = [line for line in ax.lines if line.get_marker() == "."]
+    assert len(pts) == 6
+    n = sum(int(np.isfinite(line.get_xdata()).sum()) for line in pts)
+    assert n == cal.n_points == 6 * 54 - 5
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    assert x0 < -0.5 and x1 > SIZE[0] - 0.5 and x1 < SIZE[0] * 1.1
+    assert y0 > y1  # y drawn downwards, image convention
+    assert y0 > SIZE[1] - 0.5 and y0 < SIZE[1] * 1.1
+    assert "324 corners" not in ax.get_title() and f"{n} corners in 6 views" in ax.get_title()
+
+
+def test_plot_coverage_marks_unused_views():
+    cal = _mono().suppress("img3.png")
+    ax = plot_coverage(cal)
+    grey = [line for line in ax.lines if line.get_marker() == "x"]
+    assert len(grey) == 1
+    np.testing.assert_allclose(grey[0].get_xdata(), cal.corners[3][:, 0])
+    assert len(plot_coverage(cal, show_unused=False).lines) == len(ax.lines) - 1
+
+
+def test_plot_corners_marks_the_first_corner():
+    img = np.full((300, 400), 220, np.uint8)
+    yy, xx = np.mgrid[0:300, 0:400]
+    u, v = (xx - 60) // 30, (yy - 50) // 30
+    inside = (u >= 0) & (u < 10) & (v >= 0) & (v < 7)
+    img[inside & ((u + v) % 2 == 0)] = 30
+    det = find_corners(img, PATTERN)
+    assert det.found
+    ax = plot_corners(img, det)
+    assert ax.images[0].get_array().shape == (300, 400)
+    first = [line for line in ax.lines if line.get_marker() == "o"][0]
+    np.testing.assert_allclose([first.get_xdata()[0], first.get_ydata()[0]], det.corners[0])
+    # the dark square touching corner 0 is the first board square: corner 0 at (89.5, 79.5)
+    np.testing.assert_allclose(det.corners[0], [89.5, 79.5], atol=0.05)
+    assert [t.get_text() for t in ax.texts] == ["0"]
