@@ -388,6 +388,30 @@ def test_stereo_summary_layout_and_save_round_trip(bouguet_dir, tmp_path):
         np.testing.assert_allclose(np.ravel(unc[k]), np.ravel(v), err_msg=k)
 
 
+def test_stereo_suppress_pairs(bouguet_dir):
+    own = _stereo_own(bouguet_dir)
+    sub = own.suppress(["left03.jpg / right03.jpg", 5])
+    assert isinstance(sub, StereoCalibration)
+    assert sub.used.sum() == 12 and not sub.used[2] and not sub.used[5]
+    assert sub.rejected == {
+        "left03.jpg / right03.jpg": "suppressed by the user",
+        "left06.jpg / right06.jpg": "suppressed by the user",
+    }
+    assert sub.residuals_left[2] is None and np.isnan(sub.omc_left[5]).all()
+    assert not sub.mono_left.used[2] and not sub.mono_right.used[5]
+    assert np.all(np.abs(sub.rig.T - own.rig.T) < own.uncertainty["T"])
+    assert sub.suppress(0).used.sum() == 11
+
+
+def test_regions_by_file_name_restrict_one_view(bouguet_dir):
+    paths = sorted(bouguet_dir.glob("left*.jpg"))[:4]
+    cal = calibrate_camera(paths, PATTERN, SQUARE, regions={"left02.jpg": {"rows": range(0, 3)}})
+    assert np.isnan(cal.corners[1]).any(axis=1).sum() == 27
+    assert not np.isnan(cal.corners[0]).any()
+    assert cal.corner_correction is None  # 189 corners: too few to fit the locking bias
+    assert cal.n_points == 3 * 54 + 27
+
+
 def test_stereo_rejects_inconsistent_pair_by_name(bouguet_dir):
     own = _stereo_own(bouguet_dir)
     xr = list(own.corners_right)

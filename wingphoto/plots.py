@@ -225,5 +225,6 @@ def plot_coverage(result, *, camera=None, ax=None, show_unused=True):
     ax.set_xlabel("x (px)")
     ax.set_ylabel("y (px)")
     n = sum(int(np.isfinite(corners[i][:, 0]).sum()) for i in idx)
-    ax.set_title(f"Corner coverage: {n} corners in {len(idx)} views")
+    side = f" ({camera or 'left'} camera)" if hasattr(result, "rig") else ""
+    ax.set_title(f"Corner coverage{side}: {n} corners in {len(idx)} views")
     return ax
