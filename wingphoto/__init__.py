@@ -45,3 +45,14 @@ from .ncc import FrameCorrelator, normxcorr2
 from .centroid import CntrdResult, bpass, cntrd, matlab_round, pkfnd
 from .thesis import ThesisResult, track_thesis
 from . import synth
+from .calibrate import (
+    CameraCalibration,
+    CornerDetection,
+    StereoCalibration,
+    board_points,
+    calibrate_camera,
+    calibrate_stereo,
+    find_corners,
+    suggest_suppress,
+)
+from . import plots

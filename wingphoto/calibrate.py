@@ -1098,8 +1098,9 @@ def _calibrate_from_views(
     if len(used) < _MIN_VIEWS:
         raise _too_few(views, used, what)
     for v in views:
-        if v.reason:
-            logger.warning("view %s not used: %s", v.name, v.reason)
+        if v.reason:  # the user's own choice is news, not a warning
+            level = logging.INFO if v.reason == "suppressed by the user" else logging.WARNING
+            logger.log(level, "view %s not used: %s", v.name, v.reason)
     sol, used_corners, coef = _mono_with_locking(views, used, boards, image_size, est, locking)
     for k, i in enumerate(used):
         views[i].corners = used_corners[k]
@@ -1572,7 +1573,8 @@ def _stereo_from_views(
             + "; ".join(f"{pair_names[i]}: {reasons[i]}" for i in sorted(reasons))
         )
     for i in sorted(reasons):
-        logger.warning("pair %s not used: %s", pair_names[i], reasons[i])
+        level = logging.INFO if reasons[i] == "suppressed by the user" else logging.WARNING
+        logger.log(level, "pair %s not used: %s", pair_names[i], reasons[i])
     om0, T0 = _refine_rig_pose(om0, T0, mono_l, cam_r, [obs_r[i] for i in used], [boards[i] for i in used], used)
     poses0 = np.column_stack([mono_l.omc[used], mono_l.Tc[used]])
     sol = _stereo_core(
