@@ -152,3 +152,22 @@ def test_plot_corners_marks_the_first_corner():
     # the dark square touching corner 0 is the first board square: corner 0 at (89.5, 79.5)
     np.testing.assert_allclose(det.corners[0], [89.5, 79.5], atol=0.05)
     assert [t.get_text() for t in ax.texts] == ["0"]
+
+
+def test_contact_sheet_lays_out_images_row_by_row():
+    import matplotlib.pyplot as plt
+
+    from wingphoto.plots import plot_contact_sheet
+
+    rng = np.random.default_rng(0)
+    imgs = [rng.integers(0, 255, (21, 23), dtype=np.uint8) for _ in range(10)]
+    axes = plot_contact_sheet(imgs, titles=[f"v{k}" for k in range(10)], ncols=4)
+    assert axes.shape == (3, 4)
+    assert axes[0, 1].get_title() == "v1" and axes[2, 1].get_title() == "v9"
+    assert axes[2, 1].images[0].get_array().shape == (21, 23)
+    assert not axes[2, 2].images  # unused cells stay empty
+    with pytest.raises(ValueError, match="one entry per image"):
+        plot_contact_sheet(imgs, titles=["a"])
+    with pytest.raises(ValueError, match="empty"):
+        plot_contact_sheet([])
+    plt.close("all")

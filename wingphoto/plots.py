@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plot_corners", "plot_residuals", "plot_view_errors", "plot_coverage"]
+__all__ = ["plot_corners", "plot_residuals", "plot_view_errors", "plot_coverage", "plot_contact_sheet"]
 
 
 def _axes(ax):
@@ -228,3 +228,47 @@ def plot_coverage(result, *, camera=None, ax=None, show_unused=True):
     side = f" ({camera or 'left'} camera)" if hasattr(result, "rig") else ""
     ax.set_title(f"Corner coverage{side}: {n} corners in {len(idx)} views")
     return ax
+
+
+# --- image overviews ---
+def plot_contact_sheet(images, *, titles=None, ncols=7, axes=None, cmap="gray", size=1.8):
+    """Show many images as a grid (e.g. the 21 calibration views of a pan-tilt schedule).
+
+    Parameters
+    ----------
+    images : sequence of (H, W) arrays or a read_sequence
+        The images, shown in order, row by row; each is scaled to its own min-max.
+    titles : sequence of str, optional
+        One short title per image.
+    ncols : int
+        Images per row (7 = one pan sweep of the thesis' schedule).
+    axes : array of Axes, optional
+        At least ``len(images)`` axes to draw into; a new figure otherwise.
+    size : float
+        Inches per image for a new figure.
+
+    Returns
+    -------
+    axes : (rows, ncols) ndarray of Axes
+    """
+    import matplotlib.pyplot as plt
+
+    n = len(images)
+    if n == 0:
+        raise ValueError("images is empty: nothing to show")
+    if titles is not None and len(titles) != n:
+        raise ValueError(f"titles must have one entry per image ({n}), got {len(titles)}")
+    ncols = max(1, min(int(ncols), n))
+    nrows = -(-n // ncols)
+    if axes is None:
+        _, axes = plt.subplots(nrows, ncols, figsize=(size * ncols, size * nrows), squeeze=False)
+    axes = np.asarray(axes, dtype=object).reshape(-1)
+    if axes.size < n:
+        raise ValueError(f"axes has {axes.size} axes for {n} images")
+    for k, ax in enumerate(axes):
+        ax.set_axis_off()
+        if k < n:
+            ax.imshow(np.asarray(images[k]), cmap=cmap)
+            if titles is not None:
+                ax.set_title(str(titles[k]), fontsize=8)
+    return axes.reshape(nrows, -1) if axes.size == nrows * ncols else axes
