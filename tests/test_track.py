@@ -507,3 +507,18 @@ def test_sixteen_bit_frames_use_the_full_range():
     tr = track_markers(deep, np.rint(truth[0]), progress=False)
     err, status = errors(tr, truth)
     assert (status == "ok").all() and err.max() < 0.1
+
+
+def test_lazy_sequence_from_read_sequence_gives_the_array_result(tmp_path):
+    import cv2
+
+    from wingphoto.io import read_sequence
+
+    frames, truth, _ = moving_discs(16, T=12, N=3)
+    for k, f in enumerate(frames):
+        cv2.imwrite(str(tmp_path / f"frame{k}.png"), f)
+    seq = read_sequence(tmp_path)
+    assert len(seq) == 12
+    a = track_markers(seq, np.rint(truth[0]), progress=False)
+    b = track_markers(frames, np.rint(truth[0]), progress=False)
+    pd.testing.assert_frame_equal(a, b)
