@@ -1307,10 +1307,26 @@ class _Tracker:
         q = {}
         cur = np.column_stack([X[okn], Y[okn]])
         for i in lost.tolist():
-            d = np.hypot(ref[okn, 0] - ref[i, 0], ref[okn, 1] - ref[i, 1])
-            near = np.argsort(d)[:6]
-            M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
-            if M is None or nin < 4 or rms > 1.5:
+            # neighbours that moved with this marker (same part of the wing, not a static
+            # mount marker): similar displacement from the reference when it was last seen
+            use = np.ones(okn.size, bool)
+            ti = int(self.hist_t[i, 0])
+            if 0 <= ti < res.x.shape[0]:
+                di = self.hist_x[i, 0] - ref[i]
+                dj = np.column_stack([res.x[ti, okn], res.y[ti, okn]]) - ref[okn]
+                same = np.hypot(dj[:, 0] - di[0], dj[:, 1] - di[1]) <= 3.0 + 0.3 * math.hypot(*di)
+                if same.sum() >= 4:
+                    use = same
+            cand = np.flatnonzero(use)
+            d = np.hypot(ref[okn[cand], 0] - ref[i, 0], ref[okn[cand], 1] - ref[i, 1])
+            order = cand[np.argsort(d)]
+            # the six nearest, or fewer (down to four) when they do not move together
+            for k in (6, 5, 4):
+                near = order[:k]
+                M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
+                if M is not None and nin >= 4 and rms <= 1.5:
+                    break
+            else:
                 continue  # the neighbours do not move together: no prediction to trust
             qi = _apply_affine(M, ref[i][None, :])[0]
             q[i] = (qi, okn[near])
