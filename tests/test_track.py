@@ -437,6 +437,19 @@ def test_corrections_bad_input_keeps_the_previous_file(tmp_path):
         apply_corrections(tracks, [(0, 9, 1.0, 1.0)])
 
 
+def test_corrections_interoperate_with_the_review_widget_log(tmp_path):
+    state = pytest.importorskip("wingphoto.widgets.state")
+    log = [state.Correction("left", 1, 2, 5.5, 6.25), state.Correction("right", 1, 2, 7.0, 8.0)]
+    tracks = pd.DataFrame({"camera": np.repeat(["left", "right"], 6), "frame": np.tile(np.repeat(np.arange(3), 2), 2),
+                           "point": np.tile([0, 1], 6), "x": 1.0, "y": 2.0, "status": "ok"})
+    out = apply_corrections(tracks, log)
+    fixed = out[out.status == "manual"].sort_values("camera")
+    assert fixed[["camera", "x", "y"]].values.tolist() == [["left", 5.5, 6.25], ["right", 7.0, 8.0]]
+    path = save_corrections(log, tmp_path / "log.json")
+    assert state.read_corrections(path) == tuple(log)
+    pd.testing.assert_frame_equal(apply_corrections(tracks, load_corrections(path)), out)
+
+
 def test_retrack_from_a_corrected_frame():
     frames, truth, _ = moving_discs(12, T=40)
     tracks = track_markers(frames, np.rint(truth[0]), progress=False)

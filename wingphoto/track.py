@@ -1906,8 +1906,12 @@ def _as_corrections(corrections):
         c = corrections.copy()
     else:
         rows = list(corrections)
-        if rows and not isinstance(rows[0], dict):
-            rows = [dict(zip(CORRECTION_COLUMNS, r)) for r in rows]
+        if rows and hasattr(rows[0], "_asdict"):  # wingphoto.widgets.state.Correction
+            rows = [r._asdict() for r in rows]
+        elif rows and not isinstance(rows[0], dict):
+            # (point, frame, x, y) or, as the review widget logs them, (camera, point, frame, x, y)
+            rows = [dict(zip(CORRECTION_COLUMNS if len(r) == 4 else ["camera"] + CORRECTION_COLUMNS, r))
+                    for r in rows]
         c = pd.DataFrame(rows, columns=None if rows else CORRECTION_COLUMNS)
     missing = [k for k in CORRECTION_COLUMNS if k not in c.columns]
     if missing:
@@ -1928,10 +1932,13 @@ def save_corrections(corrections, path):
     ----------
     corrections : DataFrame or list of dicts / (point, frame, x, y) tuples
         The log, in the order the corrections were made (replaying it in order gives the
-        same tracks; a later correction of the same point-frame wins).
+        same tracks; a later correction of the same point-frame wins). The review
+        widget's ``Correction(camera, point, frame, x, y)`` entries are accepted too.
     path : str or Path
-        ``.csv`` or ``.json`` (records). Written via :func:`wingphoto.io.atomic_write`, so
-        an interrupted save leaves the previous file intact.
+        ``.csv`` or ``.json`` (``{"format": "wingphoto-corrections", "version": 1,
+        "corrections": [records]}``, the widget's format). Written via
+        :func:`wingphoto.io.atomic_write`, so an interrupted save leaves the previous
+        file intact.
 
     Returns
     -------
@@ -1954,7 +1961,7 @@ def save_corrections(corrections, path):
                     r[k] = None
                 elif isinstance(v, np.generic):
                     r[k] = v.item()
-        text = json.dumps({"corrections": recs}, indent=1)
+        text = json.dumps({"format": "wingphoto-corrections", "version": 1, "corrections": recs}, indent=1)
     with atomic_write(path, "w") as f:
         f.write(text)
     return path
