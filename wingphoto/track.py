@@ -1558,14 +1558,34 @@ def _tracks_frame(res, ids, camera, frames_idx=None):
 
 
 def _merge_backward(fw, bw, tol):
-    """Flag forward/backward disagreement; fill forward losses from the backward pass."""
+    """Flag forward/backward disagreement; fill forward losses from anchored backward runs.
+
+    A backward position replaces a forward loss only inside a run of consecutive
+    backward-ok frames that, later in the sequence, agreed with an ok forward position
+    (the run is anchored to a point both passes saw at the same place); an unanchored
+    backward run may have started on the wrong blob.
+    """
     both = (fw.status == OK) & (bw.status == OK)
     d = np.hypot(fw.x - bw.x, fw.y - bw.y)
+    agree = both & (d <= tol)
     dis = both & (d > tol)
+    soft = (_R["lost_track"], _R["out_of_frame"], _R["low_score"], _R["no_signal"], _R["edge"], _R["jump"])
+    fillable = (fw.status != OK) & (bw.status == OK) & np.isin(fw.reason, soft)
+    T, N = fw.x.shape
+    fill = np.zeros_like(fillable)
+    bok = bw.status == OK
+    for i in range(N):
+        anchored = False
+        for t in range(T - 1, -1, -1):  # the backward pass ran from the end
+            if not bok[t, i]:
+                anchored = False
+                continue
+            if agree[t, i]:
+                anchored = True
+            elif fillable[t, i] and anchored:
+                fill[t, i] = True
     fw.status[dis] = FLAGGED
     fw.reason[dis] = _R["fb_disagree"]
-    soft = (_R["lost_track"], _R["out_of_frame"], _R["low_score"], _R["no_signal"], _R["edge"], _R["jump"])
-    fill = (fw.status != OK) & (bw.status == OK) & np.isin(fw.reason, soft)
     for k in _Results.names:
         getattr(fw, k)[fill] = getattr(bw, k)[fill]
     fw.status[fill] = OK
