@@ -398,9 +398,11 @@ def test_check_stereo_catches_a_swap_in_one_view():
     tr.loc[(tr.frame == 5) & (tr.point == 0), ["x", "y"]] += 10.0  # a wrong manual click stays manual
     L, R = check_stereo(tl, tr, rig)
     expect = (tl.frame.isin([2, 3]) & tl.point.isin([1, 4])).to_numpy()
-    for out in (L, R):
+    # the wrong manual click on the right makes its (ok) left partner flagged
+    bad_click = ((tl.frame == 5) & (tl.point == 0)).to_numpy()
+    for out, want in ((L, expect | bad_click), (R, expect)):
         flagged = (out.status == "flagged").to_numpy()
-        assert (flagged == expect).all()  # the swapped pairs, in both views, and nothing else
+        assert (flagged == want).all()  # the swapped pairs, in both views, and nothing else
         assert (out.loc[flagged, "reason"] == "stereo").all()
         assert out.epipolar_px.notna().all()
     assert (R.loc[R.frame == 5, "status"] == "manual").all()
