@@ -1319,6 +1319,14 @@ class _Tracker:
                 same = np.hypot(dj[:, 0] - di[0], dj[:, 1] - di[1]) <= 3.0 + 0.3 * math.hypot(*di)
                 if same.sum() >= 4:
                     use = same
+            # a marker that was moving is predicted from moving neighbours only (not from the
+            # static mount or reference dots), a static one from static ones
+            if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
+                v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
+                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
+                group = use & (still if v < 0.3 else ~still)
+                if group.sum() >= 4:
+                    use = group
             cand = np.flatnonzero(use)
             d = np.hypot(ref[okn[cand], 0] - ref[i, 0], ref[okn[cand], 1] - ref[i, 1])
             order = cand[np.argsort(d)]
