@@ -72,7 +72,8 @@ Design, and the failure each choice prevents
    map, fitted on its six nearest reliable neighbours from the reference frame (the
    picks) to now, puts it: a planar wing seen from afar moves by an affine map however
    much time has passed. Neighbours are those that had moved like the marker when it was
-   last seen (not a static mount marker next to the wing root). The prediction is used
+   last seen, and moving ones for a marker that was moving (static ones - the mount, the
+   reference dots - for a static marker). The prediction is used
    only when the neighbours agree with the map (>= 4 inliers, RMS <= 1.5 px, shrinking
    the set from six to four nearest if needed); the blob found is accepted only with a high,
    unambiguous score, if this marker's prediction is the nearest to it, and if no
