@@ -1679,6 +1679,8 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         frames and when the run stops on an exception. If it exists and was written for
         the same frames, picks and options, tracking resumes from it with identical
         results.
+    checkpoint_every : int
+        Frames between two checkpoint saves (default 500).
     progress : bool
         Show a tqdm progress bar.
 
@@ -1688,7 +1690,13 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         One row per (frame, point): camera, frame, point, x, y (sub-pixel centre, px), score
         (correlation peak), status (ok / flagged / lost), x_pix, y_pix (pixel-level match,
         NaN where there was none), reason ("" when ok). x, y are NaN when lost; a flagged
-        point carries its best guess. Frame 0 holds the refined picks (score 1).
+        point carries its best guess. Frame 0 holds the refined picks (score 1). Reasons
+        (:data:`REASONS`): ``low_score``, ``ambiguous``, ``merged``, ``conflict``,
+        ``jump``, ``no_signal``, ``appearance``, ``edge``, ``out_of_frame``,
+        ``lost_track`` (coasted longer than ``max_coast``), ``reacquired`` (first frame
+        after a re-acquisition), ``fb_disagree``, ``no_pick``, ``pick_moved`` (frame 0:
+        the refinement moved the click by more than 1.5 px); :func:`check_stereo` adds
+        ``stereo``.
 
     Raises
     ------
