@@ -56,3 +56,14 @@ from .calibrate import (
     suggest_suppress,
 )
 from . import plots
+from .track import (
+    apply_corrections,
+    check_stereo,
+    load_corrections,
+    match_windows,
+    refine_centroids,
+    retrack_from,
+    save_corrections,
+    track_markers,
+)
+from .video import write_tracking_video
