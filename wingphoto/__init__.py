@@ -67,3 +67,4 @@ from .track import (
     track_markers,
 )
 from .video import write_tracking_video
+from .pipeline import calibrate_folders, load_picks, run_demo, track_folder, track_stereo, triangulate_files

@@ -895,6 +895,33 @@ def _frozen(a):
     return a
 
 
+def _truth_table(entries):
+    """DataFrame of (parameter, estimate, truth, three_sigma) rows with error and sigma units."""
+    import pandas as pd
+
+    rows = []
+    for name, est, true, unc in entries:
+        est, true, unc = (np.atleast_1d(np.asarray(v, dtype=np.float64)).ravel() for v in (est, true, unc))
+        for k in range(est.size):
+            label = name if est.size == 1 else f"{name}[{k}]"
+            rows.append((label, est[k], true[k], unc[k] if k < unc.size else np.nan))
+    df = pd.DataFrame(rows, columns=["parameter", "estimate", "truth", "three_sigma"])
+    df["error"] = df["estimate"] - df["truth"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        df["error_in_sigma"] = 3.0 * df["error"] / df["three_sigma"]
+    df["inside_3sigma"] = df["error"].abs() <= df["three_sigma"]
+    return df[["parameter", "estimate", "truth", "error", "three_sigma", "error_in_sigma", "inside_3sigma"]]
+
+
+def _camera_entries(cam, true, unc, suffix=""):
+    return [
+        (f"fc{suffix}", cam.fc, true.fc, unc[f"fc{suffix}"]),
+        (f"cc{suffix}", cam.cc, true.cc, unc[f"cc{suffix}"]),
+        (f"alpha_c{suffix}", cam.alpha_c, true.alpha_c, unc[f"alpha_c{suffix}"]),
+        (f"kc{suffix}", cam.kc, true.kc, unc[f"kc{suffix}"]),
+    ]
+
+
 # ============================================================== single camera
 @dataclass(frozen=True)
 class CameraCalibration:
@@ -1016,6 +1043,23 @@ class CameraCalibration:
 
     def __str__(self):
         return self.summary()
+
+    def compare(self, truth):
+        """Table of the estimated intrinsics against known true values (e.g. ``wingphoto.synth``).
+
+        Parameters
+        ----------
+        truth : Camera
+            The true camera.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per scalar parameter: parameter, estimate, truth, error, three_sigma,
+            error_in_sigma (error / sigma), inside_3sigma. Parameters that were not
+            estimated have three_sigma 0 and are inside only when exactly equal.
+        """
+        return _truth_table(_camera_entries(self.camera, truth, self.uncertainty))
 
     def suppress(self, views):
         """Recalibrate without some views (the toolbox's "Add/Suppress images").
@@ -1373,6 +1417,27 @@ class StereoCalibration:
 
     def __str__(self):
         return self.summary()
+
+    def compare(self, truth):
+        """Table of every estimated stereo parameter against a known true rig.
+
+        Parameters
+        ----------
+        truth : StereoRig
+            The true rig (e.g. ``wingphoto.synth.load_rig("data-samples/rig.json")``).
+
+        Returns
+        -------
+        pandas.DataFrame
+            Rows fc_left[0] ... kc_right[4], om[0..2], T[0..2] with estimate, truth, error,
+            three_sigma, error_in_sigma and inside_3sigma (see
+            :meth:`CameraCalibration.compare`).
+        """
+        u = self.uncertainty
+        entries = _camera_entries(self.rig.left, truth.left, u, "_left")
+        entries += _camera_entries(self.rig.right, truth.right, u, "_right")
+        entries += [("om", self.rig.om, truth.om, u["om"]), ("T", self.rig.T, truth.T, u["T"])]
+        return _truth_table(entries)
 
     def suppress(self, pairs):
         """Recalibrate without some pairs.

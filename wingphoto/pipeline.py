@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,7 @@ __all__ = [
     "triangulate_files",
     "load_picks",
     "load_sample",
+    "track_stereo",
     "run_demo",
 ]
 
@@ -131,6 +133,50 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     return tracks
 
 
+def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, progress=True, **options):
+    """Track both views, check them against each other, and triangulate.
+
+    Parameters
+    ----------
+    frames_left, frames_right : str, Path or sequence
+        The two synchronized sequences (folders, globs, multi-page TIFFs, or frames).
+    picks : str, Path, PickerState or dict
+        A saved picks file, a :class:`~wingphoto.widgets.state.PickerState`, or
+        ``{"left": table, "right": table}`` of picks.
+    rig : StereoRig
+        The calibrated rig.
+    checkpoint_dir : str or Path, optional
+        Folder for per-camera checkpoints (``checkpoint_left.npz`` ...), so an interrupted
+        run resumes.
+    **options
+        Passed to :func:`wingphoto.track.track_markers`.
+
+    Returns
+    -------
+    tracks : pandas.DataFrame
+        Both cameras, after :func:`wingphoto.track.check_stereo` (inconsistent pairs
+        flagged with reason ``stereo``).
+    points : pandas.DataFrame
+        frame, point, X, Y, Z (mm, left camera frame), reproj_err (px), from the trusted
+        observations.
+    """
+    from .track import check_stereo
+
+    if isinstance(picks, (str, Path)):
+        tables = {cam: load_picks(picks, cam) for cam in ("left", "right")}
+    elif isinstance(picks, dict):
+        tables = picks
+    else:  # a PickerState
+        tables = {cam: picks.to_frame(cam) for cam in ("left", "right")}
+    tracks = {}
+    for cam, frames in (("left", frames_left), ("right", frames_right)):
+        ckpt = None if checkpoint_dir is None else Path(checkpoint_dir) / f"checkpoint_{cam}.npz"
+        tracks[cam] = track_folder(frames, tables[cam], camera=cam, checkpoint=ckpt, progress=progress, **options)
+    tl, tr = check_stereo(tracks["left"], tracks["right"], rig)
+    points = triangulate_tracks(tl, tr, rig)
+    return pd.concat([tl, tr], ignore_index=True), points
+
+
 def triangulate_files(calib, left, right, *, out=None):
     """Triangulate two tracks CSV files with a stereo calibration .mat.
 
@@ -210,25 +256,6 @@ def _save_figure(fig, path):
     plt.close(fig)
 
 
-def _calibration_vs_truth(calib, truth_rig):
-    """Table of recovered stereo parameters against the truth, in units of their 3 sigma."""
-    rows = []
-    unc = calib.uncertainty
-    for side in ("left", "right"):
-        est, true = getattr(calib.rig, side), getattr(truth_rig, side)
-        for name in ("fc", "cc"):
-            for k in range(2):
-                e, t, u = getattr(est, name)[k], getattr(true, name)[k], np.ravel(unc[f"{name}_{side}"])[k]
-                rows.append((f"{name}_{side}[{k}]", e, t, e - t, u))
-    for name in ("om", "T"):
-        for k in range(3):
-            e, t, u = getattr(calib.rig, name)[k], getattr(truth_rig, name)[k], np.ravel(unc[name])[k]
-            rows.append((f"{name}[{k}]", e, t, e - t, u))
-    df = pd.DataFrame(rows, columns=["parameter", "estimate", "truth", "error", "three_sigma"])
-    df["inside_3sigma"] = df["error"].abs() <= df["three_sigma"]
-    return df
-
-
 def run_demo(data="data-samples", *, out="results", video=True, progress=True):
     """Run the whole pipeline on a sample folder and write ``out/``.
 
@@ -258,8 +285,6 @@ def run_demo(data="data-samples", *, out="results", video=True, progress=True):
 
     from . import plots, plots3d
     from .analysis import align_rigid, find_reversals, length_statistics, reference_stillness, stroke_angle
-    from .track import check_stereo
-
     sample = load_sample(data)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -282,35 +307,29 @@ def run_demo(data="data-samples", *, out="results", video=True, progress=True):
     lines.append(f"calibration: {int(np.sum(calib.used))} of {len(calib.used)} pairs used, "
                  f"pixel error {np.array2string(px, precision=4)} px, baseline {calib.rig.baseline:.2f} mm")
     if sample["rig"] is not None:
-        cmp_ = _calibration_vs_truth(calib, sample["rig"])
+        cmp_ = calib.compare(sample["rig"])
         with atomic_write(out / "calibration_vs_truth.csv", "w", newline="") as f:
             cmp_.to_csv(f, index=False)
         lines.append(f"  vs truth: {int(cmp_['inside_3sigma'].sum())}/{len(cmp_)} parameters inside their 3-sigma; "
                      f"|T error| = {np.linalg.norm(calib.rig.T - sample['rig'].T):.3f} mm")
 
-    # 2. tracking, both views, from the saved picks
-    tracks = {}
-    for cam in ("left", "right"):
-        seq = read_sequence(sample[f"seq_{cam}"])
-        tracks[cam] = track_folder(seq, sample["picks"], camera=cam, checkpoint=out / f".checkpoint_{cam}.npz",
-                                   progress=progress)
-    tl, tr = check_stereo(tracks["left"], tracks["right"], calib.rig)
-    all_tracks = pd.concat([tl, tr], ignore_index=True)
+    # 2. tracking, both views, from the saved picks; 3. triangulation
+    all_tracks, points = track_stereo(sample["seq_left"], sample["seq_right"], sample["picks"], calib.rig,
+                                      checkpoint_dir=out / ".checkpoints", progress=progress)
+    tl = all_tracks[all_tracks["camera"] == "left"]
     write_tracks_csv(all_tracks, out / "tracks.csv")
     counts = all_tracks["status"].value_counts()
     lines.append("tracking: " + ", ".join(f"{k} {v}" for k, v in counts.items())
                  + f" of {len(all_tracks)} point-frames")
     truth = sample["truth"]
     if truth is not None:
-        for cam, t in (("left", tl), ("right", tr)):
+        for cam, t in all_tracks.groupby("camera"):
             true_xy = truth[f"points_{cam}"][t["frame"].to_numpy(), t["point"].to_numpy()]
             err = np.hypot(t["x"].to_numpy() - true_xy[:, 0], t["y"].to_numpy() - true_xy[:, 1])
             ok = (t["status"] == "ok").to_numpy()
             lines.append(f"  {cam} vs truth: RMS {np.sqrt(np.nanmean(err[ok] ** 2)):.3f} px over ok points, "
                          f"max {np.nanmax(err[ok]):.3f} px, ok points > 1 px from truth: {int(np.sum(err[ok] > 1))}")
 
-    # 3. triangulation
-    points = triangulate_tracks(tl, tr, calib.rig)
     write_points_csv(points, out / "points3d.csv")
     lines.append(f"triangulation: {int(points['X'].notna().sum())} of {len(points)} point-frames, "
                  f"median reprojection error {points['reproj_err'].median():.3f} px")
@@ -378,8 +397,7 @@ def run_demo(data="data-samples", *, out="results", video=True, progress=True):
 
         path = write_tracking_video(read_sequence(sample["seq_left"]), tl, out / "tracking_left.mp4", progress=progress)
         lines.append(f"video: {path}")
-    for cam in ("left", "right"):
-        (out / f".checkpoint_{cam}.npz").unlink(missing_ok=True)
+    shutil.rmtree(out / ".checkpoints", ignore_errors=True)  # the run finished: nothing to resume
     summary = "wingphoto demo on " + str(data) + "\n" + "\n".join(lines) + f"\nresults in {out}/"
     with atomic_write(out / "summary.txt", "w") as f:
         f.write(summary + "\n")
