@@ -219,6 +219,68 @@ class ImageView:
         self.on_motion((u0 + u1) / 2, (v0 + v1) / 2)
         self.on_release(u1, v1)
 
+    # ---------------------------------------------------------------- state plumbing
+    #: attribute holding the default file, and the hint when none is given (subclasses)
+    _file_attr = "path"
+    _file_hint = "no file: type a path or pass one"
+    _centre_by_default = False
+
+    def _from_control(self, method, value):
+        if not self._syncing:
+            method(value)
+
+    def _centre_target(self, state):
+        """(x, y) to centre the zoomed view on after a change, or None (subclasses)."""
+        return None
+
+    def _commit(self, new_state, *, centre=None):
+        self.state = new_state
+        self._camera = new_state.camera
+        centre = self._centre_by_default if centre is None else centre
+        target = self._centre_target(new_state) if centre and self.zoom > 1 else None
+        if target is not None:
+            self.centre_on(*target)
+        self._after_change()
+
+    def _apply(self, fn, *args, centre=None, **kwargs):
+        try:
+            new = fn(*args, **kwargs)
+        except (ValueError, FileNotFoundError) as exc:
+            self._report(exc)
+            self.render()
+            return False
+        self.message = ""
+        self._commit(new, centre=centre)
+        return True
+
+    def undo(self):
+        """Undo the last change."""
+        self._apply(self.state.undo)
+
+    def _path(self, path):
+        path = path if path is not None else (self.path_text.value.strip() or getattr(self, self._file_attr))
+        if not path:
+            raise ValueError(self._file_hint)
+        return Path(path)
+
+    def _write(self, path):
+        """Write the state's file to ``path``; return the status message (subclasses)."""
+        raise NotImplementedError
+
+    def save(self, path=None):
+        """Save to ``path`` or the path box (atomic); returns the path, or None on error."""
+        try:
+            path = self._path(path)
+            message = self._write(path)
+        except (ValueError, OSError) as exc:
+            self._report(exc)
+            self.render()
+            return None
+        setattr(self, self._file_attr, path)
+        self.message = message
+        self.render()
+        return path
+
     def _report(self, exc):
         self.message = str(exc)
         logger.info("%s", exc)
@@ -425,17 +487,13 @@ class Picker(ImageView):
             self.status,
         ])
 
-    def _from_control(self, method, value):
-        if not self._syncing:
-            method(value)
-
     # ---------------------------------------------------------------- state changes
-    def _commit(self, new_state, *, centre=False):
-        self.state = new_state
-        self._camera = new_state.camera
-        if centre:
-            self._centre_on_current()
-        self._after_change()
+    _file_attr = "picks_path"
+    _file_hint = "no picks file: type a path in File (e.g. picks.json) or pass picks_path"
+
+    def _centre_target(self, state):
+        pick = state.get(self._camera, state.current)
+        return None if pick is None else (pick.x, pick.y)
 
     def _after_change(self):
         self._camera = self.state.camera
@@ -450,22 +508,6 @@ class Picker(ImageView):
         finally:
             self._syncing = False
         self.render()
-
-    def _apply(self, fn, *args, centre=False, **kwargs):
-        try:
-            new = fn(*args, **kwargs)
-        except (ValueError, FileNotFoundError) as exc:
-            self._report(exc)
-            self.render()
-            return False
-        self.message = ""
-        self._commit(new, centre=centre)
-        return True
-
-    def _centre_on_current(self):
-        pick = self.state.get(self._camera, self.state.current)
-        if pick is not None and self.zoom > 1:
-            self.centre_on(pick.x, pick.y)
 
     # ---------------------------------------------------------------- handlers
     def on_click(self, u, v):
@@ -551,27 +593,13 @@ class Picker(ImageView):
         self._move_armed = False
         self._apply(self.state.undo)
 
-    def _path(self, path):
-        path = path if path is not None else (self.path_text.value.strip() or self.picks_path)
-        if not path:
-            raise ValueError("no picks file: type a path in File (e.g. picks.json) or pass picks_path")
-        return Path(path)
-
-    def save(self, path=None):
-        """Save the picks (JSON, atomic) to ``path`` or the File box; returns the path or None."""
-        try:
-            path = self._path(path)
-            self.state.save(path)
-        except (ValueError, OSError) as exc:
-            self._report(exc)
-            self.render()
-            return None
-        self.picks_path = path
-        self.message = f"saved {self.state.n_rows} markers to {path}"
+    def _write(self, path):
+        """Save the picks as JSON (see :meth:`ImageView.save`)."""
+        self.state.save(path)
+        message = f"saved {self.state.n_rows} markers to {path}"
         if not self.state.is_complete:
-            self.message += " (incomplete: " + html.escape(str(self.state.missing())) + ")"
-        self.render()
-        return path
+            message += " (incomplete: " + html.escape(str(self.state.missing())) + ")"
+        return message
 
     def load(self, path=None):
         """Load picks from ``path`` or the File box (undoable)."""

@@ -173,17 +173,13 @@ class TrackReview(ImageView):
             self.status,
         ])
 
-    def _from_control(self, method, value):
-        if not self._syncing:
-            method(value)
-
     # ---------------------------------------------------------------- state changes
-    def _commit(self, new_state, *, centre=True):
-        self.state = new_state
-        self._camera = new_state.camera
-        if centre and self.zoom > 1:
-            self.centre_on(*new_state.position())
-        self._after_change()
+    _file_attr = "corrections_path"
+    _file_hint = "no corrections file: type a path in Log (e.g. corrections.csv) or pass corrections_path"
+    _centre_by_default = True
+
+    def _centre_target(self, state):
+        return state.position()
 
     def _problem_options(self):
         table = self.state.problem_table
@@ -211,17 +207,6 @@ class TrackReview(ImageView):
         finally:
             self._syncing = False
         self.render()
-
-    def _apply(self, fn, *args, centre=True, **kwargs):
-        try:
-            new = fn(*args, **kwargs)
-        except (ValueError, FileNotFoundError) as exc:
-            self._report(exc)
-            self.render()
-            return False
-        self.message = ""
-        self._commit(new, centre=centre)
-        return True
 
     # ---------------------------------------------------------------- handlers
     def on_click(self, u, v):
@@ -344,25 +329,10 @@ class TrackReview(ImageView):
         """Undo the last correction (with its re-tracking) or load."""
         self._apply(self.state.undo)
 
-    def _path(self, path):
-        path = path if path is not None else (self.path_text.value.strip() or self.corrections_path)
-        if not path:
-            raise ValueError("no corrections file: type a path in Log (e.g. corrections.csv) or pass corrections_path")
-        return Path(path)
-
-    def save(self, path=None):
-        """Save the corrections log (CSV or JSON by suffix, atomic); returns the path or None."""
-        try:
-            path = self._path(path)
-            self.state.save_corrections(path)
-        except (ValueError, OSError) as exc:
-            self._report(exc)
-            self.render()
-            return None
-        self.corrections_path = path
-        self.message = f"saved {len(self.state.corrections)} corrections to {path}"
-        self.render()
-        return path
+    def _write(self, path):
+        """Save the corrections log, CSV or JSON by suffix (see :meth:`ImageView.save`)."""
+        self.state.save_corrections(path)
+        return f"saved {len(self.state.corrections)} corrections to {path}"
 
     def load(self, path=None, *, replay=False):
         """Load a corrections log (replacing the current one) and apply it (undoable).
