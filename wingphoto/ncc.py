@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft as _fft
 
+from .centroid import _image2d
+
 __all__ = ["normxcorr2", "FrameCorrelator"]
 
 _SQRT_EPS1 = float(np.sqrt(np.spacing(1.0)))
@@ -22,13 +24,7 @@ _SQRT_EPS1 = float(np.sqrt(np.spacing(1.0)))
 
 def _as_image(a, name):
     """Return a 2-D float64 copy-free view of ``a`` (validated), plus its integer flag."""
-    arr = np.asarray(a)
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array (rows, cols), got shape {arr.shape}")
-    if arr.dtype == bool:
-        arr = arr.astype(np.uint8)
-    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-        raise ValueError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    arr = _image2d(a, name)
     is_int = np.issubdtype(arr.dtype, np.integer)
     if not is_int and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or Inf; replace them (e.g. np.nan_to_num) first")
