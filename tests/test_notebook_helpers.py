@@ -1,4 +1,4 @@
-"""Helpers the notebooks use: align_rigid, tracking_error, find_samples, synth.load_rig."""
+"""Helpers the notebooks use: align_rigid, tracking_error, find_samples, synth.load_rig, min_frames."""
 import numpy as np
 import pandas as pd
 import pytest
@@ -59,3 +59,18 @@ def test_load_rig_round_trip_and_errors(tmp_path):
     p.write_text("{}")
     with pytest.raises(ValueError, match="lacks"):
         load_rig(p)
+
+
+def test_reference_stillness_needs_min_frames():
+    from wingphoto.analysis import reference_stillness
+
+    P = np.full((30, 2, 3), 600.0)
+    P[1:, 1] = np.nan  # reference 1 seen in frame 0 only
+    res = reference_stillness(P, [0, 1], tol_mm=0.1)
+    assert not res.valid
+    assert res.table.set_index("point").loc[1, "n"] == 1
+    assert not res.table.set_index("point").loc[1, "valid"]
+    assert res.table.set_index("point").loc[0, "valid"]
+    assert reference_stillness(P, [0, 1], tol_mm=0.1, min_frames=1).valid
+    with pytest.raises(ValueError, match="min_frames"):
+        reference_stillness(P, [0], min_frames=0)

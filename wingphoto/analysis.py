@@ -283,7 +283,7 @@ class ReferenceStillness:
         return "\n".join(lines)
 
 
-def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"):
+def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean", min_frames=None):
     """Check that the static reference points did not move during a test.
 
     Parameters
@@ -299,6 +299,11 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
     relative_to : {"mean", "first"}
         Rest position: the NaN-aware mean position, or the first frame where the point
         was seen.
+    min_frames : int, optional
+        Frames a reference must be seen in for its stillness to count (default: 10, or
+        all frames when fewer than 10 were recorded). A reference the tracker lost for
+        most of the test proves nothing, so it makes the test invalid rather than
+        passing it on one frame.
 
     Returns
     -------
@@ -331,7 +336,15 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
         finite = np.where(seen, disp, np.nan)
         max_d = np.array([np.nanmax(finite[:, k]) if n[k] else np.nan for k in range(len(ref))])
         rms = np.array([np.sqrt(np.nanmean(finite[:, k] ** 2)) if n[k] else np.nan for k in range(len(ref))])
-    valid = (n > 0) & (max_d <= tol_mm)
+    if min_frames is None:
+        min_frames = min(10, len(P))
+    if int(min_frames) < 1:
+        raise ValueError(f"min_frames must be at least 1, got {min_frames}")
+    valid = (n >= int(min_frames)) & (max_d <= tol_mm)
+    for r, k in zip(ref, n):
+        if 0 < k < int(min_frames):
+            logger.warning("reference point %d seen in only %d frames (< min_frames=%d): test not validated",
+                           r, k, int(min_frames))
     table = pd.DataFrame(
         {"point": ref, "n": n.astype(np.int64), "max_displacement": max_d, "rms_displacement": rms, "valid": valid}
     )
