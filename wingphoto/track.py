@@ -168,9 +168,22 @@ REASONS = (
     "appearance",
     "no_pick",
     "pick_moved",
+    "foreign",
+    "background",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
-_CHECKPOINT_VERSION = 1
+#: Flags about a point's precision, not its identity.
+_SOFT = np.array([_R[k] for k in ("merged", "foreign", "background")], np.int8)
+_CHECKPOINT_VERSION = 2
+#: Disk radius of the centroid (px): at least _RD_MIN, at most _RD_MAX, and
+#: _RD_MARGIN beyond the blob's measured support (blur tails).
+_RD_MIN, _RD_MAX, _RD_MARGIN = 2.5, 14.0, 3.0
+#: Flag 'background' when the RMS departure of the ring from a plane exceeds this
+#: fraction of the marker's contrast.
+_BG_RESIDUAL, _BG_RESIDUAL_FADED, _FADED, _WEAK = 0.1, 0.04, 0.6, 0.75
+#: Two markers predicted to touch are not 'merged' when the image between them falls below
+#: this fraction of the marker's peak (a visible gap: the pixel split separates them).
+_MERGE_VALLEY, _BRIDGE = 0.5, 0.8
 
 
 # --------------------------------------------------------------------------- inputs
@@ -283,30 +296,32 @@ def _parse_picks(picks):
 
 
 # --------------------------------------------------------------------------- refiner
-class _DiskCache:
-    """Precomputed disk and ring masks for the centroid, keyed by the radii."""
+class _Grid:
+    """Pixel offsets of a (2 hc + 1)^2 patch and the sums the centroid pass needs."""
 
-    def __init__(self, radii):
-        radii = np.asarray(radii, dtype=np.float64)
-        self.radii = radii
-        self.hc = int(math.ceil(radii.max())) + 2
-        o = np.arange(-self.hc, self.hc + 1)
+    _cache = {}
+
+    @classmethod
+    def get(cls, hc):
+        g = cls._cache.get(hc)
+        if g is None:
+            g = cls._cache[hc] = cls(hc)
+        return g
+
+    def __init__(self, hc):
+        self.hc = hc
+        o = np.arange(-hc, hc + 1)
         self.o = o
         gx = np.tile(o, len(o)).astype(np.float32)
         gy = np.repeat(o, len(o)).astype(np.float32)
         self.gx, self.gy = gx, gy
+        self.d2 = gx * gx + gy * gy
         self.gxy = np.ascontiguousarray(np.stack([gx, gy], axis=1))  # (K, 2)
         one = np.ones_like(gx)
         self.basis3 = np.ascontiguousarray(np.stack([one, gx, gy], axis=1))  # (K, 3)
+        self.basis3t = np.ascontiguousarray(self.basis3.T)
         self.basis6 = np.ascontiguousarray(np.stack([one, gx, gy, gx * gx, gx * gy, gy * gy], axis=1))
         self.sym = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
-        d2 = gx * gx + gy * gy
-        r2 = (radii**2)[:, None]
-        self.disk = (d2[None, :] <= r2).astype(np.float32)
-        self.ring = ((d2[None, :] > r2) & (d2[None, :] <= (radii[:, None] + 2.0) ** 2)).astype(np.float32)
-        self.ring_diag = self.ring @ np.stack([one, gx * gx, gy * gy], axis=1)
-        self.ring_diag[:, 1:] += 1e-3 * self.ring_diag[:, :1] + 1e-6
-        self.ring_diag[:, 0] += 1e-6
 
 
 _OFFSETS = {}
@@ -332,93 +347,201 @@ def _gather(frame, ix, iy, o):
     return np.take(frame, flat).astype(np.float32)
 
 
-def _centroid_pass(frame, ix, iy, cache, sel, sign, nb):
+def _plane(patch, ring, grid):
+    """Coefficients (n, 3) of the plane a + b x + c y fitted to ``patch`` on ``ring`` (bool)."""
+    w = ring.astype(np.float32)
+    mom = w @ grid.basis6  # sums of w, w x, w y, w x^2, w x y, w y^2
+    rhs = (w * patch) @ grid.basis3
+    A = mom[:, grid.sym].astype(np.float64)
+    reg = 1e-3 * A[:, 0, 0] + 1e-6
+    A[:, 1, 1] += reg
+    A[:, 2, 2] += reg
+    A[:, 0, 0] += 1e-6
+    return np.linalg.solve(A, rhs[:, :, None].astype(np.float64))[:, :, 0].astype(np.float32)
+
+
+#: Ring outliers (foreign signal) are pixels brighter than the fitted background by this
+#: fraction of the marker's peak (and by FOREIGN_NOISE noise sigmas).
+FOREIGN_FRACTION = 0.25
+FOREIGN_NOISE = 6.0
+#: The centroid weighs each disk pixel by its background-subtracted value minus this
+#: fraction of the peak (pixels below it get no weight).
+WEIGHT_FRACTION = 0.2
+
+
+def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
     """One background-subtracted centroid pass around integer pixels (ix, iy).
 
-    sel : rows of the cache's masks to use (one per point), or None for all.
-    nb : (n, 2) offset of the nearest neighbour from (ix, iy), NaN for none.
-    Returns the (n, 2) offset of the centroid from (ix, iy) and the mass.
+    rd : (n,) disk radius (px); the background plane is fitted on the 2 px ring outside.
+    sign : (n,) polarity (+1 bright, -1 dark markers).
+    nb : (n, 2) offset of the nearest neighbour from (ix, iy), NaN for none, or None.
+    noise : (n,) noise sigma (grey levels) of each marker's neighbourhood.
+    nbr_r : (n,) radius of the neighbour's blob (its disk radius): bright ring pixels
+        within it are explained by the neighbour, not foreign.
+
+    Returns a dict: d (n, 2) offset of the centroid from (ix, iy), mass, peak (largest
+    background-subtracted value in the disk), rsup (distance from the centroid of the
+    furthest disk pixel above a quarter of the peak, + 0.5 px), and the ring outliers
+    (pixels of the ring well above the plane: something bright there): nout, their
+    fraction of the ring, dip (length of the mean unit vector from the centroid to them:
+    ~1 one-sided, ~0 all around) and omin (distance of the nearest one from (ix, iy)).
     """
-    patch = _gather(frame, ix, iy, cache.o)
-    if sel is None:
-        disk, ring = cache.disk, cache.ring
-    else:
-        disk, ring = cache.disk[sel], cache.ring[sel]
+    n = len(ix)
+    hc = int(math.ceil(float(rd.max()))) + 3
+    grid = _Grid.get(hc)
+    patch = _gather(frame, ix, iy, grid.o)
+    if (sign != 1).any():
+        patch *= sign[:, None].astype(np.float32)
+    r = rd.astype(np.float32)[:, None]
+    d2 = grid.d2[None, :]
+    disk = d2 <= r * r
+    ring = (d2 <= (r + 2.0) ** 2) & ~disk
     near = None
     if nb is not None:
         # Voronoi split: keep pixels nearer to this marker than to its nearest neighbour.
         near = np.isfinite(nb[:, 0])
         if near.any():
-            half = 0.5 * np.einsum("ij,ij->i", nb, nb)
-            keep = (np.where(near[:, None], nb, 0.0) @ cache.gxy.T) < half[:, None]
+            nbf = np.where(near[:, None], nb, 0.0).astype(np.float32)
+            half = 0.5 * np.einsum("ij,ij->i", nbf, nbf)
+            keep = (nbf @ grid.gxy.T) < half[:, None]
             keep[~near] = True
-            disk = disk * keep
-            ring = ring * keep
-    # background: a plane a + b x + c y fitted to the ring (glare is a gradient across a
-    # marker; subtracting a constant would bias the centroid up the gradient)
-    wI = ring * patch
-    rhs = wI @ cache.basis3  # (n, 3): sums of w I, w x I, w y I
-    if near is None or not near.any():
-        # a full ring is symmetric about its centre: the normal equations are diagonal
-        coef = rhs / cache.ring_diag if sel is None else rhs / cache.ring_diag[sel]
-    else:
-        mom = ring @ cache.basis6  # (n, 6): sums of w, w x, w y, w x^2, w x y, w y^2
-        A = mom[:, cache.sym]  # (n, 3, 3)
-        A[:, 1, 1] += 1e-3 * mom[:, 0] + 1e-6
-        A[:, 2, 2] += 1e-3 * mom[:, 0] + 1e-6
-        A[:, 0, 0] += 1e-6
-        coef = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
-    patch -= coef @ cache.basis3.T
-    patch *= disk
-    if (sign != 1).any():
-        patch *= sign[:, None]
-    mass = patch.sum(1)
+            disk &= keep
+            ring &= keep
+    coef = _plane(patch, ring, grid)
+    res = patch - coef @ grid.basis3t
+    sig = np.where(disk, res, np.float32(0.0))
+    peak = sig.max(1)
+    thr = np.maximum(FOREIGN_FRACTION * peak, FOREIGN_NOISE * noise).astype(np.float32)
+    out = ring & (res > thr[:, None])
+    nout = out.sum(1)
+    hit = np.flatnonzero(nout)
+    expl = None
+    if hit.size and near is not None and near[hit].any() and nbr_r is not None:
+        # bright ring pixels on the neighbour's blob (its tail crosses the bisector)
+        nbh = np.where(near[hit, None], nb[hit], 1e6).astype(np.float32)
+        dxn = grid.gx[None, :] - nbh[:, 0:1]
+        dyn = grid.gy[None, :] - nbh[:, 1:2]
+        rr = np.asarray(nbr_r, np.float32)[hit, None]
+        expl = (dxn * dxn + dyn * dyn) <= rr * rr
+    if hit.size:
+        # robust background: refit the plane without the ring outliers
+        ring2 = ring[hit] & ~out[hit]
+        ok2 = ring2.sum(1) >= 8
+        if ok2.any():
+            h2 = hit[ok2]
+            c2 = _plane(patch[h2], ring2[ok2], grid)
+            res[h2] = patch[h2] - c2 @ grid.basis3t
+            sig[h2] = np.where(disk[h2], res[h2], np.float32(0.0))
+            peak[h2] = sig[h2].max(1)
+    # how far the background departs from a plane (glare, the membrane's edge), relative
+    # to the marker's contrast
+    rin = ring & ~out
     with np.errstate(invalid="ignore", divide="ignore"):
-        d = (patch @ cache.gxy) / mass[:, None]
-    return d, mass
+        bgres = np.sqrt(np.where(rin, res * res, np.float32(0.0)).sum(1) / rin.sum(1)) / peak
+    mass = sig.sum(1)
+    wgt = np.maximum(sig - (wfrac * peak)[:, None], np.float32(0.0)) if wfrac > 0 else np.maximum(sig, 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = (wgt @ grid.gxy) / wgt.sum(1)[:, None]
+    fx = np.nan_to_num(d[:, 0:1]).astype(np.float32)
+    fy = np.nan_to_num(d[:, 1:2]).astype(np.float32)
+    frac = np.zeros(n)
+    dip = np.zeros(n)
+    omin = np.full(n, np.inf)
+    if hit.size:
+        o = out[hit]
+        if expl is not None:
+            o = o & ~expl
+            nout[hit] = o.sum(1)
+            keep_hit = nout[hit] > 0
+            hit, o = hit[keep_hit], o[keep_hit]
+    if hit.size:
+        ex = grid.gx[None, :] - fx[hit]
+        ey = grid.gy[None, :] - fy[hit]
+        dn = np.sqrt(np.maximum(ex * ex + ey * ey, 1e-12))
+        ux = np.where(o, ex / dn, 0.0).sum(1)
+        uy = np.where(o, ey / dn, 0.0).sum(1)
+        dip[hit] = np.hypot(ux, uy) / nout[hit]
+        frac[hit] = nout[hit] / np.maximum(ring[hit].sum(1), 1)
+        omin[hit] = np.sqrt(np.where(o, d2, np.inf).min(1))
+    # the valley between this blob and its neighbour: the largest value on the segment
+    # between them at 40, 50 and 60 % of the way (a gap between two blobs is dark)
+    valley = np.full(n, np.nan)
+    if near is not None and near.any():
+        w = np.flatnonzero(near)
+        hc2 = grid.hc
+        side = 2 * hc2 + 1
+        vals = []
+        for f in (0.4, 0.5, 0.6):
+            u = np.clip(np.rint(f * nb[w, 0]).astype(np.int64), -hc2, hc2)
+            v = np.clip(np.rint(f * nb[w, 1]).astype(np.int64), -hc2, hc2)
+            vals.append(res[w, (v + hc2) * side + (u + hc2)])
+        valley[w] = np.min(vals, axis=0) / peak[w]
+    return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley)
 
 
-def _refine(frame, x, y, cache, sign, nbr_xy=None, iterations=2, sel=None):
-    """Iterated background-subtracted centroid; returns x, y, mass (arrays).
+def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, nbr_r=None,
+            wfrac=WEIGHT_FRACTION):
+    """Iterated background-subtracted centroid around estimates (x, y).
 
-    The disk is centred on the pixel nearest the estimate; a further pass is made only
-    for the points whose nearest pixel changed.
+    The disk is centred on the pixel nearest the estimate; a further pass is made for the
+    points whose nearest pixel changed and for those whose own blob spills into the
+    background ring all around (the disk then grows by 1.5 px, up to ``rmax``).
+
+    Returns x, y, mass and a dict of per-point diagnostics: ``rd`` (disk radius used),
+    ``rsup``, ``peak`` and ``foreign`` (something bright that is not this blob lies in the
+    ring, touching the disk: the centroid may be pulled).
     """
     x = np.array(x, dtype=np.float64)
     y = np.array(y, dtype=np.float64)
+    n = len(x)
     H, W = frame.shape
-    if sel is None:
-        sel = np.arange(len(x))
-    sign = sign[sel]
+    rd = np.array(rd, dtype=np.float64)
+    rmax = np.full(n, np.inf) if rmax is None else np.broadcast_to(rmax, (n,))
     ix = np.rint(x).astype(np.int64)
     iy = np.rint(y).astype(np.int64)
     np.clip(ix, 0, W - 1, out=ix)
     np.clip(iy, 0, H - 1, out=iy)
-    mass = np.full(len(x), np.nan)
-    todo = np.arange(len(x))
-    for it in range(iterations):
+    mass = np.full(n, np.nan)
+    peak = np.full(n, np.nan)
+    bgres = np.full(n, np.nan)
+    valley = np.full(n, np.nan)
+    foreign = np.zeros(n, bool)
+    todo = np.arange(n)
+    it, grow = 0, 2
+    while True:
         jx, jy = ix[todo], iy[todo]
         nb = None
         if nbr_xy is not None:
             nb = (nbr_xy[todo] - np.column_stack([jx, jy])).astype(np.float32)
-        d, m = _centroid_pass(frame, jx, jy, cache, sel[todo], sign[todo], nb)
+        r = _centroid_pass(frame, jx, jy, rd[todo], sign[todo], nb, noise[todo],
+                           None if nbr_r is None else nbr_r[todo], wfrac)
+        d, m = r["d"], r["mass"]
         good = m > 0
         nx = np.where(good, jx + d[:, 0], x[todo])
         ny = np.where(good, jy + d[:, 1], y[todo])
         x[todo], y[todo], mass[todo] = nx, ny, m
-        if it + 1 == iterations:
-            break
+        peak[todo], bgres[todo], valley[todo] = r["peak"], r["bgres"], r["valley"]
+        # own blob larger than the disk: ring outliers all around (not one-sided); the
+        # disk grows, and if the ring is still not clean something else is there
+        spill = (r["nout"] > 0) & ((r["frac"] > 0.4) | (r["dip"] < 0.5))
+        spill &= (rd[todo] + 1.5 <= rmax[todo]) & (grow > 0)
+        foreign[todo] = (r["nout"] > 0) & ~spill & (r["omin"] <= rd[todo] + 1.0)
+        it += 1
         kx = np.clip(np.rint(nx).astype(np.int64), 0, W - 1)
         ky = np.clip(np.rint(ny).astype(np.int64), 0, H - 1)
-        moved = good & ((kx != jx) | (ky != jy))
-        if not moved.any():
+        redo = spill | (good & ((kx != jx) | (ky != jy)) & (it < iterations))
+        if not redo.any():
             break
-        todo = todo[moved]
-        ix[todo], iy[todo] = kx[moved], ky[moved]
-    return x, y, mass
+        if spill.any():
+            rd[todo[spill]] += 1.5
+            grow -= 1
+        todo = todo[redo]
+        ix[todo], iy[todo] = kx[redo], ky[redo]
+    return x, y, mass, dict(rd=rd, peak=peak, foreign=foreign, bgres=bgres, valley=valley)
 
 
-def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iterations=2):
+def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iterations=2,
+                     threshold=WEIGHT_FRACTION):
     """Refine marker centres to sub-pixel precision (the fast sub-pixel refiner).
 
     Parameters
@@ -438,6 +561,13 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
         are ignored (Voronoi split), so a close neighbour does not pull the centroid.
     iterations : int
         Re-centre the disk on the pixel nearest the estimate and repeat (default 2).
+    threshold : float
+        Each pixel is weighted by its background-subtracted value minus ``threshold``
+        times the blob's peak (0: the plain background-subtracted centroid). The default
+        (0.2) makes the centre insensitive to what the disk holds besides the blob (a
+        membrane edge, glare, the tail of another blob) at the cost of a slight pixel
+        locking on blobs with hard edges (< 0.03 px on an unblurred disc, < 0.01 px with
+        the optics' blur).
 
     Returns
     -------
@@ -448,11 +578,14 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
 
     Notes
     -----
-    The background is the mean of a 2 px ring just outside the disk. With the disk
-    centred on an integer pixel and containing the whole blob, the centroid of the
-    background-subtracted, anti-aliased blob is unbiased up to an edge term of order
+    The background is a plane fitted to a 2 px ring just outside the disk (refitted
+    without the ring pixels that stand far above it). With the disk centred on an integer
+    pixel and containing the whole blob, the centroid of the background-subtracted,
+    anti-aliased blob (``threshold=0``) is unbiased up to an edge term of order
     ``0.1 / area`` px; there is no pixel locking, unlike parabolic peak fits or the
-    hard-masked ``cntrd`` of Crocker & Grier with a mask smaller than the blob.
+    hard-masked ``cntrd`` of Crocker & Grier with a mask smaller than the blob. A blob
+    that spills into the ring all around (``radius`` too small) gets a disk 1.5 px
+    larger, at most twice.
 
     Examples
     --------
@@ -471,9 +604,12 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
     if np.any(~np.isfinite(radius)) or np.any(radius <= 0):
         raise ValueError(f"radius must be positive, got {radius}")
     sign = np.broadcast_to(np.asarray(polarity, dtype=np.float32), (n,)).copy()
-    cache = _DiskCache(radius)
     nbr = None if neighbours is None else np.asarray(neighbours, dtype=np.float64).reshape(-1, 2)
-    x, y, mass = _refine(frame, pts[:, 0], pts[:, 1], cache, sign, nbr, iterations)
+    threshold = float(threshold)
+    if not 0.0 <= threshold < 1.0:
+        raise ValueError(f"threshold must be in [0, 1), got {threshold}")
+    x, y, mass, _ = _refine(frame, pts[:, 0], pts[:, 1], radius, sign, np.zeros(n), nbr, iterations,
+                            wfrac=threshold)
     return np.column_stack([x, y]), mass
 
 
@@ -679,6 +815,33 @@ def _robust_affine(src, dst, iters=3, tol=2.0, quality=False):
     return M, rms, int(keep.sum())
 
 
+def _neighbour_prediction(p0, prev, now):
+    """Where a marker at ``p0`` moved to, from neighbours that moved from ``prev`` to ``now``.
+
+    ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
+    A robust affine map when four or more of them agree with one (RMS <= 1.5 px), else
+    the mean displacement of the largest group that moved alike (within 2 px + 10 %: all
+    of them when there are two or three, at least three otherwise). Returns the predicted
+    position and its tolerance (px), or None when the neighbours do not move together.
+    """
+    m = len(prev)
+    if m >= 4:
+        M, rms, nin = _robust_affine(prev, now, quality=True)
+        if M is not None and nin >= 4 and rms <= 1.5:
+            return _apply_affine(M, p0[None, :])[0], 2.5
+    if m < 2:
+        return None
+    D = now - prev
+    tol = 2.0 + 0.1 * np.hypot(D[:, 0], D[:, 1])
+    dd = np.hypot(D[:, None, 0] - D[None, :, 0], D[:, None, 1] - D[None, :, 1])
+    alike = dd <= tol[:, None]
+    j = int(np.argmax(alike.sum(1)))
+    if alike[j].sum() < min(3, m):
+        return None
+    dm = D[alike[j]].mean(0)
+    return p0 + dm, 2.0 + 0.1 * math.hypot(*dm)
+
+
 # --------------------------------------------------------------------------- tracker
 _PARAM_DEFAULTS = dict(
     search_radius=20,
@@ -729,7 +892,7 @@ class _Tracker:
     """State of one tracking pass; :meth:`step` processes one frame."""
 
     _STATE = ("hist_x", "hist_t", "nh", "sigma", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref")
+              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "rd0", "noise", "peak0", "last_ok")
 
     def __init__(self, p, is_u8, shape):
         self.p = p
@@ -759,6 +922,7 @@ class _Tracker:
         f = frame.astype(np.float32)
         sign = np.ones(n, np.float32)
         rb = np.zeros(n)
+        nz = np.zeros(n)
         cx = np.zeros(n)
         cy = np.zeros(n)
         from scipy import ndimage
@@ -769,8 +933,14 @@ class _Tracker:
             x0, x1 = max(ix - g, 0), min(ix + g + 1, W)
             y0, y1 = max(iy - g, 0), min(iy + g + 1, H)
             patch = f[y0:y1, x0:x1]
-            border = np.concatenate([patch[:2].ravel(), patch[-2:].ravel(), patch[:, :2].ravel(), patch[:, -2:].ravel()])
-            bg = float(np.median(border))
+            # background: a plane fitted to the patch's 2 px border (glare is a gradient)
+            yy, xx = np.mgrid[y0:y1, x0:x1]
+            bmask = np.zeros(patch.shape, bool)
+            bmask[:2], bmask[-2:], bmask[:, :2], bmask[:, -2:] = True, True, True, True
+            A = np.column_stack([np.ones(bmask.sum()), xx[bmask] - ix, yy[bmask] - iy])
+            coef = np.linalg.lstsq(A, patch[bmask].astype(np.float64), rcond=None)[0]
+            plane = coef[0] + coef[1] * (xx - ix) + coef[2] * (yy - iy)
+            bg = float(coef[0])
             dif = np.diff(patch, axis=1).ravel()
             noise = 1.4826 * float(np.median(np.abs(dif - np.median(dif)))) / math.sqrt(2) + 1e-6 * (abs(bg) + 1)
             lx, ly = ix - x0, iy - y0
@@ -779,7 +949,7 @@ class _Tracker:
                 s = 1.0 if core.mean() >= bg else -1.0
             else:
                 s = float(p.polarity)
-            sig = s * (patch - bg)
+            sig = s * (patch - plane)
             near = sig[max(ly - 2, 0): ly + 3, max(lx - 2, 0): lx + 3]
             peak = float(near.max())
             if not peak > max(4.0 * noise, 1e-3 * (abs(bg) + 1)):
@@ -798,16 +968,28 @@ class _Tracker:
             if half[i] > 0:
                 r = min(r, float(half[i]))
             w = np.where(comp, sig, 0.0)
-            yy, xx = np.mgrid[y0:y1, x0:x1]
             cx[i] = float((w * xx).sum() / w.sum())
             cy[i] = float((w * yy).sum() / w.sum())
             rb[i] = max(r, 1.0)
+            nz[i] = noise
             sign[i] = s
         self.sign = sign
         self.rb = rb
-        self._set_cache()
+        self.noise = nz
+        self.rd = np.minimum(rb + _RD_MARGIN, _RD_MAX)
         nbr = self._nearest_positions(cx, cy, np.ones(n, bool))
-        x, y, mass = _refine(frame, cx, cy, self.cache, sign, nbr, iterations=3)
+        x, y, mass, info = _refine(frame, cx, cy, self.rd, sign, nz, nbr, iterations=3, rmax=self._rmax())
+        # a click is within ~0.7 px of a marker's centre: a refinement that moved further
+        # was pulled by something (glare, the membrane's edge, an unpicked neighbour), as
+        # is one that saw a foreign blob or a rough background, and the click is the
+        # better centre for the template and the motion model
+        self.pick_moved = ((np.hypot(x - xy[:, 0], y - xy[:, 1]) > 1.5) | info["foreign"]
+                           | (info["bgres"] > _BG_RESIDUAL))
+        x = np.where(self.pick_moved, xy[:, 0], x)
+        y = np.where(self.pick_moved, xy[:, 1], y)
+        self.rd0 = info["rd"]
+        self.rd = self.rd0.copy()
+        self.peak0 = info["peak"]
         h = np.where(half > 0, half, np.maximum(np.ceil(rb + 1.5), 3)).astype(np.int64)
         px, py = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
         edge = (px - h < 0) | (py - h < 0) | (px + h > W - 1) | (py + h > H - 1)
@@ -836,13 +1018,17 @@ class _Tracker:
         self.sigma = np.ones(n)
         self.lostflag = np.zeros(n, bool)
         self.last_upd = np.zeros(n, np.int64)
+        self.last_ok = np.zeros(n, np.int64)
         self.pos = np.column_stack([x, y])
         self.ref_pos = self.pos.copy()
+        self._set_local()
         return self
 
-    def _set_cache(self):
-        self.cache = _DiskCache(self.rb + 1.5)
-        self.reach = 2.0 * (self.cache.hc + 1)
+    def _set_local(self):
+        """Radius (px) of a marker's neighbourhood: four typical neighbour spacings."""
+        _, d, _ = _nearest_two(self.ref_pos[:, 0], self.ref_pos[:, 1], np.ones(len(self.ref_pos), bool))
+        d0 = d[:, 0][np.isfinite(d[:, 0])]
+        self.local = max(40.0, 4.0 * float(np.median(d0))) if d0.size else 40.0
 
     def _cut(self, frame, x, y, h):
         """Template of size 2h+1 centred on sub-pixel (x, y), float32."""
@@ -863,7 +1049,7 @@ class _Tracker:
         j, d, _ = _nearest_two(x, y, valid)
         j0 = j[:, 0]
         out = np.column_stack([x[j0], y[j0]])
-        far = (j0 < 0) | (d[:, 0] > self.reach)
+        far = (j0 < 0) | (d[:, 0] > self.rd + 3.0 + self.rb[np.maximum(j0, 0)])
         out[far] = np.nan
         return out
 
@@ -888,7 +1074,7 @@ class _Tracker:
         self.tplr = [np.ascontiguousarray(d["tplr"][i, : s[i], : s[i]]) for i in range(len(s))]
         self.tplu = [None] * len(s)
         self._init_stack()
-        self._set_cache()
+        self._set_local()
         return self
 
     # ------------------------------------------------------------ prediction
@@ -927,6 +1113,7 @@ class _Tracker:
         rb = self.rb
         pred = self.predict(t)
         gap = np.abs(t - self.hist_t[:, 0])
+        self._gap = gap
         newly = ~self.lostflag & (gap > p.max_coast)
         if newly.any():
             self.lostflag |= newly
@@ -942,6 +1129,7 @@ class _Tracker:
         jn = j2[:, 0]
         dn = d2[:, 0]
         merged = (dn < rb + rb[np.maximum(jn, 0)] + 1.0) & inside
+        self._merged = merged
         crowded = dn < rb + rb[np.maximum(jn, 0)] + 4.0
         # fast path: a marker moving predictably, alone, confidently matched last frame
         # is refined at its prediction and verified, its NCC search skipped this frame
@@ -978,10 +1166,11 @@ class _Tracker:
         # sub-pixel refinement of everything that has a pixel-level position, jointly
         ridx = np.flatnonzero(np.isfinite(XP))
         mass = np.full(n, np.nan)
+        self._info = info = dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n),
+                                 peak=np.full(n, np.nan), valley=np.full(n, np.nan))
         if ridx.size:
             nb = self._voronoi(XP, YP, prx, pry, jn, inside)
-            X[ridx], Y[ridx], mass[ridx] = _refine(frame, XP[ridx], YP[ridx], self.cache, self.sign,
-                                                   nb[ridx], 2, sel=ridx)
+            X[ridx], Y[ridx], mass[ridx] = self._refine_at(frame, ridx, XP, YP, nb)
         for i in (eidx.tolist() if edge.any() else ()):
             XP[i] = YP[i] = np.nan  # no correlation match for edge markers
         if fidx.size:
@@ -995,11 +1184,20 @@ class _Tracker:
             if bad.any():
                 vidx = fidx[bad]
                 self._search(frame, vidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
-                nb = self._voronoi(XP, YP, prx, pry, jn, inside)
-                X[vidx], Y[vidx], mass[vidx] = _refine(frame, XP[vidx], YP[vidx], self.cache, self.sign,
-                                                       nb[vidx], 2, sel=vidx)
                 sidx = np.concatenate([sidx, vidx])
-                lose = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
+                lose2 = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
+                XP[lose2 & ~lose] = np.nan
+                YP[lose2 & ~lose] = np.nan
+                lose = lose2
+                # refine again the re-searched markers and those whose neighbour moved
+                nb2 = self._voronoi(XP, YP, prx, pry, jn, inside)
+                changed = (np.isfinite(nb2[:, 0]) != np.isfinite(nb[:, 0])) | (
+                    np.hypot(nb2[:, 0] - nb[:, 0], nb2[:, 1] - nb[:, 1]) > 1.5)
+                changed[vidx] = True
+                redo = np.flatnonzero(changed & np.isfinite(XP))
+                if redo.size:
+                    X[redo], Y[redo], mass[redo] = self._refine_at(frame, redo, XP, YP, nb2)
+        self._mass = mass
         # status
         midx = np.flatnonzero(fits)
         resid = np.hypot(X - prx, Y - pry)
@@ -1020,7 +1218,9 @@ class _Tracker:
                  "appearance"),
                 (SEC[midx] >= sc - p.ambiguity_margin, FLAGGED, "ambiguous"),
                 ((self.nh[midx] >= 3) & (res_ > lim), FLAGGED, "jump"),
-                (merged[midx], FLAGGED, "merged"),
+                (info["foreign"][midx], FLAGGED, "foreign"),
+                (self._rough(info, midx, sc), FLAGGED, "background"),
+                (self._touching(XP, YP, prx, pry, gap, inside, info)[midx], FLAGGED, "merged"),
                 (lo, FLAGGED, "conflict"),
                 (((sc < p.lost_score) | ~(ms > 0)) & ~lo, LOST, "low_score"),
             )
@@ -1030,6 +1230,19 @@ class _Tracker:
                     rs[cond] = _R[why]
             ST[midx] = st
             RS[midx] = rs
+            # a marker resuming after a gap (or restarting) must have moved like its
+            # neighbours since it was last reliable
+            resume = np.abs(t - self.last_ok[midx]) > 1
+            chk = midx[(st == OK) & (resume | (self.nh[midx] < 3))]
+            if chk.size:
+                bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
+                # resuming after a gap without neighbours to vouch for it: only close to
+                # its own prediction
+                unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
+                far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.sigma[unk])]
+                bad = np.concatenate([bad, far])
+                ST[bad] = FLAGGED
+                RS[bad] = _R["jump"]
             li = midx[lo]
             X[li], Y[li] = prx[li], pry[li]
             lst = midx[st == LOST]
@@ -1045,10 +1258,15 @@ class _Tracker:
             X[eidx[~okm]] = np.nan
             Y[eidx[~okm]] = np.nan
 
-        # motion model: only reliable points feed it
-        rel = ST == OK
-        if eidx.size:
-            rel |= RS == _R["edge"]
+        # motion model: reliable points feed it (and edge points), and those flagged for
+        # their precision only (merged, foreign, background) if they moved like their
+        # neighbours: a marker next to another or in glare keeps being followed instead of
+        # coasting, but not onto a neighbour's or an unpicked marker's blob
+        okm = ST == OK
+        rel = okm | ((ST == FLAGGED) & (RS == _R["edge"]))
+        soft = np.flatnonzero((ST == FLAGGED) & np.isin(RS, _SOFT))
+        if soft.size:
+            rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
         ri = np.flatnonzero(rel)
         if ri.size:
             hx, ht = self.hist_x, self.hist_t
@@ -1071,12 +1289,15 @@ class _Tracker:
             if us.size:
                 e = resid[us]
                 self.sigma[us] = np.sqrt(0.8 * self.sigma[us] ** 2 + 0.2 * e * e)
-        self.last_score = np.where(rel & np.isfinite(S), S, 0.0)
-        okm = ST == OK
+        self.last_score = np.where(okm & np.isfinite(S), S, 0.0)
+        self.last_ok[okm] = t
         self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
+        # the disk grew where the blob spilled out of it (foreshortening, motion blur);
+        # it shrinks back slowly towards its frame-0 size
+        self.rd = np.where(okm, np.maximum(info["rd"], 0.95 * self.rd + 0.05 * self.rd0), self.rd)
         self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
         # template update: confident match whose appearance has changed
-        upd = rel & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
+        upd = okm & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
         if upd.any():
             lam = p.update_rate
             for i in np.flatnonzero(upd).tolist():
@@ -1085,7 +1306,7 @@ class _Tracker:
                 self._set_template(i)
                 self.last_upd[i] = t
         if self.lostflag.any():
-            self._reacquire(frame, t, res, direction, X, Y, S, XP, YP, ST, RS)
+            self._reacquire(frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred)
         res.x[t], res.y[t], res.score[t] = X, Y, S
         res.xpix[t], res.ypix[t] = XP, YP
         res.status[t], res.reason[t] = ST, RS
@@ -1102,19 +1323,132 @@ class _Tracker:
             d = np.column_stack([d, np.full(n, np.inf)])
         return j, d
 
+    def _touching(self, XP, YP, prx, pry, gap, inside, info):
+        """Markers whose blob touches another's on this frame (flag 'merged').
+
+        Positions are the pixel-level matches, or for a marker without one its prediction
+        if it was tracked on the previous frame (a coasting marker's prediction may have
+        drifted onto a neighbour: it does not make that neighbour 'merged'). Two blobs
+        touch when closer than the sum of their radii + 1 px, unless the image between
+        them falls below ``_MERGE_VALLEY`` of the peak (a visible gap), and whenever it
+        stays above ``_BRIDGE`` of the peak (a bright bridge).
+        """
+        px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
+        py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
+        ok = np.isfinite(px)
+        j, d = self._neighbours(px, py, ok)
+        jn = np.maximum(j[:, 0], 0)
+        touch = ok & (j[:, 0] >= 0) & (d[:, 0] < self.rb + self.rb[jn] + 1.0)
+        # (and whatever the radii, a bright bridge to the neighbour is a merge)
+        return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
+
+    def _rough(self, info, idx, score):
+        """Markers whose background is too far from a plane for their contrast.
+
+        The ring's RMS departure from the fitted plane, relative to the marker's peak,
+        above ``_BG_RESIDUAL``; above ``_BG_RESIDUAL_FADED`` for a marker whose peak fell
+        below ``_FADED`` of its frame-0 value (turning edge-on: the blob is a faint smear
+        that a membrane edge or glare shifts by up to a pixel) or whose correlation is
+        weak (below ``_WEAK``: the blob no longer looks like the marker).
+        """
+        bg = info["bgres"][idx]
+        faded = (info["peak"][idx] < _FADED * self.peak0[idx]) | (score < _WEAK)
+        return (bg > _BG_RESIDUAL) | (faded & (bg > _BG_RESIDUAL_FADED))
+
+    def _rmax(self):
+        """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""
+        return np.minimum(self.rb + _RD_MARGIN + 3.0, _RD_MAX)
+
+    def _refine_at(self, frame, idx, XP, YP, nb):
+        """Refine markers ``idx`` from their pixel-level positions; record diagnostics."""
+        x, y, m, inf = _refine(frame, XP[idx], YP[idx], self.rd[idx], self.sign[idx], self.noise[idx], nb[idx], 2,
+                               rmax=self._rmax()[idx], nbr_r=self._nbr_r[idx])
+        info = self._info
+        info["foreign"][idx] = inf["foreign"]
+        info["bgres"][idx] = inf["bgres"]
+        info["peak"][idx] = inf["peak"]
+        info["valley"][idx] = inf["valley"]
+        info["rd"][idx] = inf["rd"]
+        return x, y, m
+
     def _voronoi(self, XP, YP, prx, pry, jn, inside):
         """Position of each marker's nearest neighbour for the pixel split (NaN: none near)."""
         j = np.maximum(jn, 0)
-        nx = np.where(np.isfinite(XP[j]), XP[j], np.where(inside[j], prx[j], np.nan))
-        ny = np.where(np.isfinite(YP[j]), YP[j], np.where(inside[j], pry[j], np.nan))
+        # only a neighbour matched on this frame: one that lost its match to another
+        # marker (conflict) may be anywhere near its prediction, and a split there could
+        # cut this marker's own blob (its blob, if near, is caught as foreign instead)
+        nx = XP[j].copy()
+        ny = YP[j].copy()
         cx = np.where(np.isfinite(XP), XP, prx)
         cy = np.where(np.isfinite(YP), YP, pry)
         # the neighbour matters when its blob can reach this marker's disk or ring
-        reach = self.cache.radii + 3.0 + self.rb[j]
-        far = (jn < 0) | ~(np.hypot(nx - cx, ny - cy) < reach)
+        reach = self.rd + 3.0 + self.rb[j]
+        dn = np.hypot(nx - cx, ny - cy)
+        # (a neighbour on the same pixel is a conflict, flagged elsewhere: no split)
+        far = (jn < 0) | ~(dn < reach) | (dn < 1.5)
         nx[far] = np.nan
         ny[far] = np.nan
+        self._nbr_r = self.rd[j] + 0.5
         return np.column_stack([nx, ny])
+
+    def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0):
+        """Markers ``chk`` whose displacement since their last ok frame disagrees
+        with that of their neighbours (those that moved like them then).
+
+        The neighbours' displacement over the same interval (:func:`_neighbour_prediction`)
+        predicts where the marker must be; further than its tolerance is inconsistent. Prevents a marker that coasted, or restarted, from
+        landing on a neighbour's or an unpicked marker's blob that happens to lie near its
+        extrapolated prediction.
+        """
+        okn = np.flatnonzero(ST == OK)
+        T = res.x.shape[0]
+        bad = []
+        good = []
+        for i in chk.tolist():
+            if since is None:
+                ti = int(self.last_ok[i])
+                if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
+                    continue
+                Pi = np.array([res.x[ti, i], res.y[ti, i]])
+            else:  # since the last position that fed the motion model
+                ti = int(self.hist_t[i, 0])
+                if not 0 <= ti < T or ti == t:
+                    continue
+                Pi = self.hist_x[i, 0]
+            cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
+            if cand.size < 2:
+                continue
+            prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
+            d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
+            keep = d <= self.local
+            cand, prev, d = cand[keep], prev[keep], d[keep]
+            if cand.size < 2:
+                continue
+            # neighbours that moved like this marker when it was last seen
+            t1 = int(self.hist_t[i, 1])
+            if self.nh[i] >= 2 and t1 != ti and 0 <= 2 * ti - t1 < T:
+                vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
+                tb = ti - (1 if t1 < ti else -1)
+                if 0 <= tb < T:
+                    vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
+                    same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
+                    if same.sum() >= 2:
+                        cand, prev, d = cand[same], prev[same], d[same]
+            o = np.argsort(d)[:6]
+            cand, prev = cand[o], prev[o]
+            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]))
+            if pq is None:
+                continue  # the neighbours do not move together: nothing to compare with
+            q, lim = pq
+            if math.hypot(X[i] - q[0], Y[i] - q[1]) > max(lim, min_lim):
+                bad.append(i)
+            else:
+                good.append(i)
+        if both:
+            return np.array(bad, np.int64), np.array(good, np.int64)
+        if since is not None:
+            return np.array(good, np.int64)
+        return np.array(bad, np.int64)
 
     def _conflicts(self, sidx, XP, YP, prx, pry, merged, jn):
         """Markers that lost a blob to another marker this frame (boolean, all markers).
@@ -1135,7 +1469,9 @@ class _Tracker:
         same &= si[:, None] != vi
         if not same.any():
             return lose
-        cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5)
+        # a marker that coasted has a vaguer prediction: it does not take a blob from one
+        # tracked on the previous frame
+        cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5 + (self._gap - 1))
         for a, b in zip(*np.nonzero(same)):
             i, j = si[a], vi[b]
             if merged[i] and merged[j]:
@@ -1228,12 +1564,16 @@ class _Tracker:
     def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
 
-        Each wide-searched marker's position is predicted by a robust affine map fitted,
-        on its six nearest anchors, from the reference frame to now; anchors are the other
-        markers with a motion model (at their predictions) and the wide-searched markers
-        whose match is unambiguous. A match further than 3 px from that prediction, or
-        ambiguous, is replaced by a search of radius 4 around the prediction. Prevents a
-        marker starting (or restarting) on its neighbour's blob when its own is dim.
+        Each wide-searched marker's displacement from the reference frame is predicted from
+        its nearest anchors (up to six, within ``self.local`` px in the reference frame):
+        the other markers with a motion model (at their predictions) and the wide-searched
+        markers whose match is unambiguous (:func:`_neighbour_prediction`: a robust affine
+        map, or the mean displacement of a group that moved alike), so that static mount
+        and reference dots next to the wing, or a look-alike, do not decide. An ambiguous (or low-score) match is replaced by a search of radius 4 at
+        the prediction; an unambiguous match that disagrees with the prediction is made
+        ambiguous (flagged, not trusted), never moved. Without such a group the match
+        stands as it is. Prevents a marker starting (or restarting) on its neighbour's or
+        an unpicked marker's blob when its own is dim or the two look alike.
         """
         p = self.p
         n = len(self.h)
@@ -1250,15 +1590,18 @@ class _Tracker:
         for k in np.flatnonzero(wsel).tolist():
             i = idx[k]
             cand = anchors[anchors != i]
-            if cand.size < 3:
-                continue
             d = np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1])
+            cand, d = cand[d <= self.local], d[d <= self.local]
+            if cand.size < 2:
+                continue
             near = cand[np.argsort(d)[:6]]
-            M, rms, nin = _robust_affine(ref[near], np.column_stack([ax[near], ay[near]]), quality=True)
-            if M is None or nin < 4 or rms > 1.5:
+            pq = _neighbour_prediction(ref[i], ref[near], np.column_stack([ax[near], ay[near]]))
+            if pq is None:
                 continue  # the neighbours do not move together: no prediction to trust
-            q = _apply_affine(M, ref[i][None, :])[0]
-            if good[k] and math.hypot(mx[k] - q[0], my[k] - q[1]) <= 3.0:
+            q, lim = pq
+            if good[k]:
+                if math.hypot(mx[k] - q[0], my[k] - q[1]) > lim + 1.0:
+                    second[k] = score[k]  # match and neighbours disagree: ambiguous
                 continue
             redo.append(k)
             qs.append(q)
@@ -1289,66 +1632,116 @@ class _Tracker:
         score[redo], second[redo] = a[2], a[3]
         pred[idx[redo]] = q
 
-    def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS):
-        """Search again for long-lost markers where their reliable neighbours put them.
+    def _predict_lost(self, i, okn, X, Y, res, t):
+        """Where lost marker ``i`` should be now, from its neighbours.
 
-        Each lost marker's position is predicted by a robust affine map fitted, on its six
-        nearest reliable neighbours, from the reference frame (the first frame of the pass,
-        where every marker is known) to now: a planar wing seen from afar moves by an affine
-        map, whatever the time elapsed. A blob found near the prediction is accepted only
-        if it correlates well and unambiguously, and if no other marker (tracked, or lost
-        and predicted the same way) is expected nearer to it.
+        Returns (prediction, search radius, minimum score, neighbours used) or None.
+
+        1. From its last reliable frame: the neighbours reliable then and now (those that
+           moved like it then, when there are enough) map its last position to now
+           (:func:`_neighbour_prediction`: a robust affine map or the mean displacement of
+           a group that moved alike). Short intervals keep this accurate on a bending,
+           pitching wing.
+        2. Else from the reference frame (the first frame of the pass, where every marker
+           is known) by a robust affine map on its nearest reliable neighbours: a planar
+           wing seen from afar moves by an affine map however much time has passed.
+        3. An isolated marker (fewer than two neighbours within ``self.local`` px - the
+           two-marker rigid target, a reference dot) is searched for in a wide window
+           (``search_radius``) at its last position, moved like its one neighbour if it has
+           one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
         """
         p = self.p
-        okn = np.flatnonzero(ST == OK)
-        if okn.size < 3:
-            return
+        T = res.x.shape[0]
         ref = self.ref_pos
-        lost = np.flatnonzero(self.lostflag)
-        est_x = X.copy()
-        est_y = Y.copy()
-        q = {}
+        ti = int(self.hist_t[i, 0])
+        Pi = self.hist_x[i, 0]
+        cand = okn[okn != i]
+        if 0 <= ti < T and cand.size:
+            c1 = cand[res.status[ti, cand] == OK]
+            prev = np.column_stack([res.x[ti, c1], res.y[ti, c1]])
+            d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
+            keep = d <= self.local
+            c1, prev, d = c1[keep], prev[keep], d[keep]
+            # neighbours that moved like this marker when it was last seen
+            t1 = int(self.hist_t[i, 1])
+            if c1.size >= 2 and self.nh[i] >= 2 and t1 != ti:
+                vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
+                tb = ti - (1 if t1 < ti else -1)
+                if 0 <= tb < T:
+                    vj = prev - np.column_stack([res.x[tb, c1], res.y[tb, c1]])
+                    same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
+                    if same.sum() >= 2:
+                        c1, prev, d = c1[same], prev[same], d[same]
+            o = np.argsort(d)[:6]
+            c1, prev = c1[o], prev[o]
+            if c1.size >= 2:
+                pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
+                if pq is not None:
+                    return pq[0], p.reacquire_radius, p.reacquire_score, c1
+        # 2. from the reference frame
         cur = np.column_stack([X[okn], Y[okn]])
-        for i in lost.tolist():
-            # neighbours that moved with this marker (same part of the wing, not a static
-            # mount marker): similar displacement from the reference when it was last seen
+        if okn.size >= 4:
             use = np.ones(okn.size, bool)
-            ti = int(self.hist_t[i, 0])
-            if 0 <= ti < res.x.shape[0]:
-                di = self.hist_x[i, 0] - ref[i]
-                dj = np.column_stack([res.x[ti, okn], res.y[ti, okn]]) - ref[okn]
-                same = np.hypot(dj[:, 0] - di[0], dj[:, 1] - di[1]) <= 3.0 + 0.3 * math.hypot(*di)
-                if same.sum() >= 4:
-                    use = same
-            # a marker that was moving is predicted from moving neighbours only (not from the
-            # static mount or reference dots), a static one from static ones
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
                 still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
-                group = use & (still if v < 0.3 else ~still)
+                group = still if v < 0.3 else ~still
                 if group.sum() >= 4:
                     use = group
-            cand = np.flatnonzero(use)
-            d = np.hypot(ref[okn[cand], 0] - ref[i, 0], ref[okn[cand], 1] - ref[i, 1])
-            order = cand[np.argsort(d)]
-            # the six nearest, or fewer (down to four) when they do not move together
+            cidx = np.flatnonzero(use)
+            d = np.hypot(ref[okn[cidx], 0] - ref[i, 0], ref[okn[cidx], 1] - ref[i, 1])
+            order = cidx[np.argsort(d)]
             for k in (6, 5, 4):
                 near = order[:k]
+                if near.size < 4:
+                    break
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
-                    break
-            else:
-                continue  # the neighbours do not move together: no prediction to trust
-            qi = _apply_affine(M, ref[i][None, :])[0]
-            q[i] = (qi, okn[near])
-            est_x[i], est_y[i] = qi
+                    return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
+        # 3. an isolated marker
+        nbr = cand[np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1]) <= self.local]
+        if nbr.size >= 2:
+            return None
+        q = Pi.copy()
+        if nbr.size == 1 and 0 <= ti < T and res.status[ti, nbr[0]] == OK:
+            j = nbr[0]
+            q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
+        return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
+
+    def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred):
+        """Search again for long-lost markers where their reliable neighbours put them.
+
+        Each lost marker's position is predicted from its neighbours
+        (:meth:`_predict_lost`). A blob found near the prediction is accepted only if it
+        correlates well and unambiguously, if no other marker (tracked, or lost and
+        predicted the same way) is expected nearer to it, if no uncertain marker is near
+        (it could be that marker's blob), and if its refinement finds no foreign blob.
+        """
+        p = self.p
+        okn = np.flatnonzero(ST == OK)
+        if okn.size < 1:
+            return
+        lost = np.flatnonzero(self.lostflag)
+        # where every marker is expected: its position, else (tracked but without a
+        # position on this frame) its prediction; long-lost ones from the neighbours below
+        est_x = X.copy()
+        est_y = Y.copy()
+        nopos = ~np.isfinite(X) & ~self.lostflag
+        est_x[nopos], est_y[nopos] = pred[nopos, 0], pred[nopos, 1]
+        q = {}
+        for i in lost.tolist():
+            r = self._predict_lost(i, okn, X, Y, res, t)
+            if r is not None:
+                q[i] = r
+                est_x[i], est_y[i] = r[0]
         valid = np.isfinite(est_x)
-        for i, (qi, nbrs) in q.items():
+        found = {}
+        for i, (qi, rad, min_sc, nbrs) in q.items():
             ci = np.rint(qi).astype(np.int64)
             hh = int(self.h[i])
             if ci[0] - hh < 0 or ci[1] - hh < 0 or ci[0] + hh > self.W - 1 or ci[1] + hh > self.H - 1:
                 continue
-            maps, origin, shp = match_windows(frame, [self.tplu[i]], ci[None, :], [p.reacquire_radius])
+            maps, origin, shp = match_windows(frame, [self.tplu[i]], ci[None, :], [rad])
             m = maps.shape[1]
             ex = max(2.0, float(self.rb[i]))
             g = _GRID[:m]
@@ -1365,7 +1758,7 @@ class _Tracker:
                 maps[0][nearj] = -2.0
             u, v, score, second, _ = _analyse_maps(maps, shp, np.array([ex]))
             sc = float(score[0])
-            if not (sc >= p.reacquire_score and second[0] < sc - p.ambiguity_margin):
+            if not (sc >= min_sc and second[0] < sc - p.ambiguity_margin):
                 continue
             mx, my = float(origin[0, 0] + u[0]), float(origin[0, 1] + v[0])
             # joint test: this marker's prediction must be the nearest to the blob
@@ -1377,24 +1770,58 @@ class _Tracker:
                 dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
                 if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
                     continue
-                # and no uncertain marker (flagged, or lost) may be near: the blob could
-                # be its own, and a wrong re-acquisition would be confident from then on
-                unsure = others & (ST != OK)
-                if unsure.any():
-                    block = 2.5 * (self.rb[i] + 1.0) + dq
-                    if np.hypot(est_x[unsure] - mx, est_y[unsure] - my).min() < block:
+            # and no uncertain marker (flagged, or lost) may be near: the blob could be
+            # its own, and a wrong re-acquisition would be confident from then on
+            unsure = others & (ST != OK)
+            block = 2.5 * (self.rb[i] + 1.0) + dq
+            blockers = np.flatnonzero(unsure & (np.hypot(est_x - mx, est_y - my) < block))
+            found[i] = (mx, my, sc, blockers)
+        # a blocker does not block when it is itself re-acquired on another blob and the
+        # two assignments fit the two predictions better than the swap (two lost
+        # neighbours would otherwise block each other for ever), or when it is a marker
+        # flagged for its precision only, matched on another blob
+        accept = []
+        for i, (mx, my, sc, blockers) in found.items():
+            okb = True
+            for j in blockers.tolist():
+                if j in found:
+                    mj = found[j]
+                    apart = math.hypot(mj[0] - mx, mj[1] - my) > self.rb[i] + self.rb[j]
+                    qi, qj = q[i][0], q[j][0]
+                    same = math.hypot(mx - qi[0], my - qi[1]) + math.hypot(mj[0] - qj[0], mj[1] - qj[1])
+                    swap = math.hypot(mj[0] - qi[0], mj[1] - qi[1]) + math.hypot(mx - qj[0], my - qj[1])
+                    if apart and same + 2.0 < swap:
                         continue
+                elif (ST[j] == FLAGGED and RS[j] in _SOFT and np.isfinite(X[j])
+                      and math.hypot(X[j] - mx, Y[j] - my) > self.rb[i] + self.rb[j]):
+                    continue
+                okb = False
+                break
+            if okb:
+                accept.append(i)
+        for i in accept:
+            mx, my, sc, _ = found[i]
+            nbrs = q[i][3]
+            # the blob must also be where the neighbours put the marker's last ok position
+            # (a long interval: 4 px tolerance, a neighbour's blob is further)
+            Xi, Yi = X[i], Y[i]
+            X[i], Y[i] = mx, my
+            wrong = self._inconsistent(np.array([i]), X, Y, ST, res, t, min_lim=4.0).size > 0
+            X[i], Y[i] = Xi, Yi
+            if wrong:
+                continue
             nb = None
             oth = np.flatnonzero(np.isfinite(X))
             oth = oth[oth != i]
             if oth.size:
                 dj = np.hypot(X[oth] - mx, Y[oth] - my)
                 k = int(np.argmin(dj))
-                if dj[k] < self.reach:
+                if dj[k] < self.rd[i] + 3.0 + self.rb[oth[k]]:
                     nb = np.array([[X[oth[k]], Y[oth[k]]]])
             sel = np.array([i])
-            rx, ry, mass = _refine(frame, [mx], [my], self.cache, self.sign, nb, 2, sel=sel)
-            if not mass[0] > p.min_mass_ratio * self.mass0[i]:
+            rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
+                                        rmax=self._rmax()[sel])
+            if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
                 continue
             X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
             ST[i] = FLAGGED
@@ -1403,7 +1830,7 @@ class _Tracker:
             # restart the motion model with the neighbours' velocity
             tp = t - direction
             vel = np.zeros(2)
-            if 0 <= tp < res.x.shape[0]:
+            if 0 <= tp < res.x.shape[0] and len(nbrs):
                 both = nbrs[res.status[tp, nbrs] == OK]
                 if both.size:
                     vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
@@ -1414,6 +1841,7 @@ class _Tracker:
             self.nh[i] = 2
             self.sigma[i] = 1.0
             self.lostflag[i] = False
+            self.last_ok[i] = t  # checked against the neighbours: the reference from now on
 
 
 # --------------------------------------------------------------------------- driver
@@ -1756,8 +2184,8 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         fw.score[0] = 1.0
         fw.status[0] = OK
         # a click is within ~0.7 px of a marker's centre: a refinement that moved further
-        # was pulled by something (an unpicked neighbour, glare)
-        moved = np.hypot(tracker.pos[:, 0] - xy[:, 0], tracker.pos[:, 1] - xy[:, 1]) > 1.5
+        # was pulled by something (an unpicked neighbour, glare); the click is kept
+        moved = tracker.pick_moved
         fw.status[0, moved] = FLAGGED
         fw.reason[0, moved] = _R["pick_moved"]
         box.update(phase="forward", next=1, tracker=tracker)
@@ -1829,6 +2257,7 @@ def _backward_tracker(fwd, fw, T):
     b.lostflag = np.zeros(n, bool)
     b.sigma = np.ones(n)
     b.last_upd = np.full(n, T - 1, np.int64)
+    b.last_ok = np.full(n, T - 1, np.int64)
     b.tplr = [t.copy() for t in fwd.tpl0]
     b.tplu = [None] * n
     b.last_score = np.ones(n)
@@ -1838,6 +2267,7 @@ def _backward_tracker(fwd, fw, T):
         tl = int(okf[-1]) if okf.size else 0
         b.hist_x[i, 0] = (fw.x[tl, i], fw.y[tl, i])
         b.hist_t[i, 0] = tl
+        b.last_ok[i] = tl
         b.lostflag[i] = tl < T - 1 - fwd.p.max_coast
     return b
 
@@ -2150,6 +2580,8 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
     # the corrected position is the user's: keep it exactly as the seed
     tracker.hist_x[:, 0] = seed
     tracker.hist_t[:, 0] = frame
+    tracker.last_ok[:] = frame
+    tracker.last_upd[:] = frame
     trusted = ("ok", "manual", "interpolated")
     for k, back in ((1, 1), (2, 2)):
         prev = t[(t["frame"] == frame - back) & t["point"].isin(pts)].drop_duplicates("point").set_index("point")
