@@ -479,13 +479,58 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
     return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley)
 
 
+def _find_foreign(frame, ix, iy, rd, sign, peak):
+    """Centre (absolute x, y; NaN where none) of a foreign blob next to each disk.
+
+    The brightest pixel outside the disk and away from the patch border, if it stands
+    above half the marker's peak over the patch's background (its lower quartile beyond
+    the ring) and is a local maximum; its centre is the centroid of the 3 x 3 pixels
+    around it above half its value.
+    """
+    n = len(ix)
+    hc = int(math.ceil(float(rd.max()))) + 9
+    g = _Grid.get(hc)
+    P = _gather(frame, ix, iy, g.o) * sign[:, None].astype(np.float32)
+    r = rd.astype(np.float32)[:, None]
+    outside = g.d2[None, :] > (r + 2.0) ** 2
+    bg = np.nanpercentile(np.where(outside, P, np.nan), 25, axis=1).astype(np.float32)
+    S = P - bg[:, None]
+    cand = (g.d2[None, :] > r * r) & (g.d2[None, :] <= (hc - 1.5) ** 2)
+    Sc = np.where(cand, S, -np.inf)
+    k = Sc.argmax(1)
+    ar = np.arange(n)
+    val = Sc[ar, k]
+    side = 2 * hc + 1
+    u = k % side
+    v = k // side
+    out = np.full((n, 2), np.nan)
+    for q in np.flatnonzero(val > 0.5 * peak).tolist():
+        img = S[q].reshape(side, side)
+        w3 = img[v[q] - 1: v[q] + 2, u[q] - 1: u[q] + 2]
+        if w3.shape != (3, 3) or w3.max() > img[v[q], u[q]]:
+            continue  # not a local maximum
+        w = np.maximum(w3 - 0.5 * val[q], 0.0)
+        sw = float(w.sum())
+        if not sw > 0:
+            continue
+        o = np.arange(-1, 2)
+        out[q, 0] = ix[q] + (u[q] - hc) + float((w.sum(0) * o).sum()) / sw
+        out[q, 1] = iy[q] + (v[q] - hc) + float((w.sum(1) * o).sum()) / sw
+    return out
+
+
 def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, nbr_r=None,
-            wfrac=WEIGHT_FRACTION):
+            wfrac=WEIGHT_FRACTION, explain=None):
     """Iterated background-subtracted centroid around estimates (x, y).
 
     The disk is centred on the pixel nearest the estimate; a further pass is made for the
-    points whose nearest pixel changed and for those whose own blob spills into the
-    background ring all around (the disk then grows by 1.5 px, up to ``rmax``).
+    points whose nearest pixel changed, for those whose own blob spills into the
+    background ring all around (the disk then grows by 1.5 px, up to ``rmax``), and for
+    those (``explain``, (n,) bool: points whose identity is not in doubt) with a foreign
+    blob next to them whose centre can be found (:func:`_find_foreign`): it then takes
+    the place of the nearest neighbour in the pixel split, unless a known neighbour is
+    nearer, and the point stays ``foreign`` unless a dark gap (``_MERGE_VALLEY``)
+    separates the two blobs.
 
     Returns x, y, mass and a dict of per-point diagnostics: ``rd`` (disk radius used),
     ``rsup``, ``peak`` and ``foreign`` (something bright that is not this blob lies in the
@@ -507,7 +552,9 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
     valley = np.full(n, np.nan)
     foreign = np.zeros(n, bool)
     todo = np.arange(n)
-    it, grow = 0, 2
+    it, grow, nexpl = 0, 2, 1
+    explain = np.zeros(n, bool) if explain is None else np.asarray(explain, bool)
+    explained = np.zeros(n, bool)
     while True:
         jx, jy = ix[todo], iy[todo]
         nb = None
@@ -527,9 +574,26 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
         spill &= (rd[todo] + 1.5 <= rmax[todo]) & (grow > 0)
         foreign[todo] = (r["nout"] > 0) & ~spill & (r["omin"] <= rd[todo] + 1.0)
         it += 1
+        expl = np.zeros(len(todo), bool)
+        fi = np.flatnonzero(foreign[todo] & good & explain[todo])
+        if fi.size and nexpl > 0:
+            nexpl -= 1
+            rows = todo[fi]
+            f = _find_foreign(frame, jx[fi], jy[fi], rd[rows], sign[rows], peak[rows])
+            use = np.isfinite(f[:, 0])
+            if nbr_xy is not None:
+                dk = np.hypot(nbr_xy[rows, 0] - jx[fi], nbr_xy[rows, 1] - jy[fi])
+                use &= ~(dk <= np.hypot(f[:, 0] - jx[fi], f[:, 1] - jy[fi]))
+            if use.any():
+                nbr_xy = np.full((n, 2), np.nan) if nbr_xy is None else np.array(nbr_xy, dtype=np.float64)
+                nbr_r = np.full(n, np.nan) if nbr_r is None else np.array(nbr_r, dtype=np.float64)
+                nbr_xy[rows[use]] = f[use]
+                nbr_r[rows[use]] = rd[rows[use]]
+                expl[fi[use]] = True
+                explained[rows[use]] = True
         kx = np.clip(np.rint(nx).astype(np.int64), 0, W - 1)
         ky = np.clip(np.rint(ny).astype(np.int64), 0, H - 1)
-        redo = spill | (good & ((kx != jx) | (ky != jy)) & (it < iterations))
+        redo = spill | expl | (good & ((kx != jx) | (ky != jy)) & (it < iterations))
         if not redo.any():
             break
         if spill.any():
@@ -537,6 +601,8 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
             grow -= 1
         todo = todo[redo]
         ix[todo], iy[todo] = kx[redo], ky[redo]
+    # a foreign blob split off is only harmless when a dark gap separates the two
+    foreign |= explained & ~(valley < _MERGE_VALLEY)
     return x, y, mass, dict(rd=rd, peak=peak, foreign=foreign, bgres=bgres, valley=valley)
 
 
@@ -815,21 +881,22 @@ def _robust_affine(src, dst, iters=3, tol=2.0, quality=False):
     return M, rms, int(keep.sum())
 
 
-def _neighbour_prediction(p0, prev, now):
+def _neighbour_prediction(p0, prev, now, min_m=2):
     """Where a marker at ``p0`` moved to, from neighbours that moved from ``prev`` to ``now``.
 
     ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
     A robust affine map when four or more of them agree with one (RMS <= 1.5 px), else
     the mean displacement of the largest group that moved alike (within 2 px + 10 %: all
-    of them when there are two or three, at least three otherwise). Returns the predicted
-    position and its tolerance (px), or None when the neighbours do not move together.
+    of them when there are two or three, at least three otherwise; a single neighbour's
+    displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
+    (px), or None when the neighbours do not move together.
     """
     m = len(prev)
     if m >= 4:
         M, rms, nin = _robust_affine(prev, now, quality=True)
         if M is not None and nin >= 4 and rms <= 1.5:
             return _apply_affine(M, p0[None, :])[0], 2.5
-    if m < 2:
+    if m < max(min_m, 1):
         return None
     D = now - prev
     tol = 2.0 + 0.1 * np.hypot(D[:, 0], D[:, 1])
@@ -892,7 +959,7 @@ class _Tracker:
     """State of one tracking pass; :meth:`step` processes one frame."""
 
     _STATE = ("hist_x", "hist_t", "nh", "sigma", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "rd0", "noise", "peak0", "last_ok")
+              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "noise", "peak0", "last_ok")
 
     def __init__(self, p, is_u8, shape):
         self.p = p
@@ -987,8 +1054,10 @@ class _Tracker:
                            | (info["bgres"] > _BG_RESIDUAL))
         x = np.where(self.pick_moved, xy[:, 0], x)
         y = np.where(self.pick_moved, xy[:, 1], y)
-        self.rd0 = info["rd"]
-        self.rd = self.rd0.copy()
+        # the disk of each marker: its blob radius + _RD_MARGIN, grown at frame 0 where the
+        # blob spilled out of it; fixed from then on (a disk that grows in the middle of a
+        # sequence swallows a neighbour sooner than it catches a growing blob)
+        self.rd = info["rd"]
         self.peak0 = info["peak"]
         h = np.where(half > 0, half, np.maximum(np.ceil(rb + 1.5), 3)).astype(np.int64)
         px, py = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
@@ -1027,6 +1096,7 @@ class _Tracker:
     def _set_local(self):
         """Radius (px) of a marker's neighbourhood: four typical neighbour spacings."""
         _, d, _ = _nearest_two(self.ref_pos[:, 0], self.ref_pos[:, 1], np.ones(len(self.ref_pos), bool))
+        self._spacing = np.where(np.isfinite(d[:, 0]), d[:, 0], np.inf)
         d0 = d[:, 0][np.isfinite(d[:, 0])]
         self.local = max(40.0, 4.0 * float(np.median(d0))) if d0.size else 40.0
 
@@ -1114,6 +1184,8 @@ class _Tracker:
         pred = self.predict(t)
         gap = np.abs(t - self.hist_t[:, 0])
         self._gap = gap
+        self._pred = pred
+        self._steady = (gap == 1) & (self.nh == 3) & (np.abs(t - self.last_ok) == 1)
         newly = ~self.lostflag & (gap > p.max_coast)
         if newly.any():
             self.lostflag |= newly
@@ -1232,6 +1304,25 @@ class _Tracker:
             RS[midx] = rs
             # a marker resuming after a gap (or restarting) must have moved like its
             # neighbours since it was last reliable
+            # a 'jump' from the motion model that the neighbours made too (the whole wing,
+            # or the rigid target between two stills, stopped or turned at once) is not one
+            jmp = midx[rs == _R["jump"]]
+            if jmp.size:
+                # neighbours: the ok markers and the other jumpers too, if the jump is too
+                # short to have landed on another marker's blob (< 40 % of the spacing)
+                short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
+                ST[short] = OK
+                bad_j, fine = self._inconsistent(jmp, X, Y, ST, res, t, both=True, min_m=1)
+                ST[short] = FLAGGED
+                # a lone marker (nothing to compare with) far from any other: a short jump to
+                # a strong, unambiguous match is its own blob
+                lone = np.setdiff1d(jmp, np.concatenate([bad_j, fine]))
+                lone = lone[(resid[lone] < 0.3 * self._spacing[lone]) & (S[lone] >= 0.9)
+                            & (SEC[lone] < S[lone] - p.ambiguity_margin)]
+                fine = np.concatenate([fine, lone])
+                st[np.isin(midx, fine)] = OK
+                rs[np.isin(midx, fine)] = 0
+                ST[midx], RS[midx] = st, rs
             resume = np.abs(t - self.last_ok[midx]) > 1
             chk = midx[(st == OK) & (resume | (self.nh[midx] < 3))]
             if chk.size:
@@ -1292,9 +1383,6 @@ class _Tracker:
         self.last_score = np.where(okm & np.isfinite(S), S, 0.0)
         self.last_ok[okm] = t
         self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
-        # the disk grew where the blob spilled out of it (foreshortening, motion blur);
-        # it shrinks back slowly towards its frame-0 size
-        self.rd = np.where(okm, np.maximum(info["rd"], 0.95 * self.rd + 0.05 * self.rd0), self.rd)
         self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
         # template update: confident match whose appearance has changed
         upd = okm & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
@@ -1360,9 +1448,14 @@ class _Tracker:
         return np.minimum(self.rb + _RD_MARGIN + 3.0, _RD_MAX)
 
     def _refine_at(self, frame, idx, XP, YP, nb):
-        """Refine markers ``idx`` from their pixel-level positions; record diagnostics."""
+        """Refine markers ``idx`` from their pixel-level positions; record diagnostics.
+
+        A foreign blob next to a marker tracked on the previous frame and matched where
+        predicted is split off like a known neighbour (:func:`_refine`)."""
+        steady = self._steady[idx] & (np.hypot(XP[idx] - self._pred[idx, 0], YP[idx] - self._pred[idx, 1])
+                                      <= 2.0 + 2.0 * self.sigma[idx])
         x, y, m, inf = _refine(frame, XP[idx], YP[idx], self.rd[idx], self.sign[idx], self.noise[idx], nb[idx], 2,
-                               rmax=self._rmax()[idx], nbr_r=self._nbr_r[idx])
+                               rmax=self.rd[idx], nbr_r=self._nbr_r[idx], explain=steady)
         info = self._info
         info["foreign"][idx] = inf["foreign"]
         info["bgres"][idx] = inf["bgres"]
@@ -1391,7 +1484,7 @@ class _Tracker:
         self._nbr_r = self.rd[j] + 0.5
         return np.column_stack([nx, ny])
 
-    def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0):
+    def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0, min_m=2):
         """Markers ``chk`` whose displacement since their last ok frame disagrees
         with that of their neighbours (those that moved like them then).
 
@@ -1416,13 +1509,13 @@ class _Tracker:
                     continue
                 Pi = self.hist_x[i, 0]
             cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
-            if cand.size < 2:
+            if cand.size < min_m:
                 continue
             prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
             d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
             keep = d <= self.local
             cand, prev, d = cand[keep], prev[keep], d[keep]
-            if cand.size < 2:
+            if cand.size < min_m:
                 continue
             # neighbours that moved like this marker when it was last seen
             t1 = int(self.hist_t[i, 1])
@@ -1436,7 +1529,7 @@ class _Tracker:
                         cand, prev, d = cand[same], prev[same], d[same]
             o = np.argsort(d)[:6]
             cand, prev = cand[o], prev[o]
-            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]))
+            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m)
             if pq is None:
                 continue  # the neighbours do not move together: nothing to compare with
             q, lim = pq
@@ -1820,7 +1913,7 @@ class _Tracker:
                     nb = np.array([[X[oth[k]], Y[oth[k]]]])
             sel = np.array([i])
             rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
-                                        rmax=self._rmax()[sel])
+                                        rmax=self.rd[sel])
             if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
                 continue
             X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
