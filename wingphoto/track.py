@@ -174,6 +174,7 @@ REASONS = (
 _R = {name: i for i, name in enumerate(REASONS)}
 #: Flags about a point's precision, not its identity.
 _SOFT = np.array([_R[k] for k in ("merged", "foreign", "background")], np.int8)
+_IS_SOFT = np.isin(np.arange(len(REASONS)), _SOFT)
 _CHECKPOINT_VERSION = 2
 #: Disk radius of the centroid (px): at least _RD_MIN, at most _RD_MAX, and
 #: _RD_MARGIN beyond the blob's measured support (blur tails).
@@ -430,6 +431,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         if ok2.any():
             h2 = hit[ok2]
             c2 = _plane(patch[h2], ring2[ok2], grid)
+            coef[h2] = c2
             res[h2] = patch[h2] - c2 @ grid.basis3t
             sig[h2] = np.where(disk[h2], res[h2], np.float32(0.0))
             peak[h2] = sig[h2].max(1)
@@ -468,15 +470,454 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
     valley = np.full(n, np.nan)
     if near is not None and near.any():
         w = np.flatnonzero(near)
-        hc2 = grid.hc
-        side = 2 * hc2 + 1
+        H, W = frame.shape
         vals = []
         for f in (0.4, 0.5, 0.6):
-            u = np.clip(np.rint(f * nb[w, 0]).astype(np.int64), -hc2, hc2)
-            v = np.clip(np.rint(f * nb[w, 1]).astype(np.int64), -hc2, hc2)
-            vals.append(res[w, (v + hc2) * side + (u + hc2)])
+            u = np.rint(f * nb[w, 0].astype(np.float64)).astype(np.int64)
+            v = np.rint(f * nb[w, 1].astype(np.float64)).astype(np.int64)
+            img = frame[np.clip(iy[w] + v, 0, H - 1), np.clip(ix[w] + u, 0, W - 1)].astype(np.float64)
+            vals.append(sign[w] * img - (coef[w, 0] + coef[w, 1] * u + coef[w, 2] * v))
         valley[w] = np.min(vals, axis=0) / peak[w]
     return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley)
+
+
+# --------------------------------------------------------------------------- accelerator
+# Optional: with numba installed, the centroid pass and the windowed correlation run as
+# compiled loops over the markers (the same arithmetic as the numpy code above and
+# cv2.matchTemplate); without it, or with WINGPHOTO_NO_NUMBA=1, the numpy/OpenCV code runs.
+try:  # pragma: no cover - depends on the environment
+    import os as _os
+
+    if _os.environ.get("WINGPHOTO_NO_NUMBA"):
+        raise ImportError
+    import numba as _numba
+except ImportError:  # pragma: no cover
+    _numba = None
+
+
+def _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi):
+    """Solve the regularised 3 x 3 normal equations of the plane (as :func:`_plane`)."""
+    reg = 1e-3 * s0 + 1e-6
+    a00 = s0 + 1e-6
+    a11 = sxx + reg
+    a22 = syy + reg
+    a01, a02, a12 = sx, sy, sxy
+    # Cramer's rule on the symmetric matrix
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    a = (c00 * si + c01 * sxi + c02 * syi) / det
+    b = (c01 * si + c11 * sxi + c12 * syi) / det
+    c = (c02 * si + c12 * sxi + c22 * syi) / det
+    return a, b, c
+
+
+def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl):
+    """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
+
+    Returns dx, dy, mass, peak, nout (not explained by the neighbour), frac, dip, omin,
+    bgres, valley."""
+    H, W = frame.shape
+    hc = int(np.ceil(r)) + 3
+    near = not np.isnan(nx_)
+    half = 0.5 * (nx_ * nx_ + ny_ * ny_) if near else 0.0
+    r2 = r * r
+    R2 = (r + 2.0) * (r + 2.0)
+    nd = 0
+    nr = 0
+    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
+    inside = cx - hc >= 0 and cy - hc >= 0 and cx + hc <= W - 1 and cy + hc <= H - 1
+    for v in range(-hc, hc + 1):
+        yy = min(max(cy + v, 0), H - 1)
+        rem = R2 - v * v
+        if rem < 0:
+            continue
+        uw = int(np.sqrt(rem))
+        for u in range(-uw, uw + 1):
+            d2 = u * u + v * v
+            if d2 > R2:
+                continue
+            if near and not (nx_ * u + ny_ * v < half):
+                continue
+            if inside:
+                val = sg * np.float64(frame[yy, cx + u])
+            else:
+                val = sg * np.float64(frame[yy, min(max(cx + u, 0), W - 1)])
+            if d2 <= r2:
+                du[nd] = u
+                dv[nd] = v
+                dval[nd] = val
+                nd += 1
+            else:
+                ru[nr] = u
+                rv[nr] = v
+                rval[nr] = val
+                nr += 1
+                s0 += 1.0
+                sx += u
+                sy += v
+                sxx += u * u
+                sxy += u * v
+                syy += v * v
+                si += val
+                sxi += u * val
+                syi += v * val
+    pa, pb, pc = _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
+    peak = 0.0
+    if nd > 0:
+        peak = -np.inf
+        for k in range(nd):
+            res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+            if res > peak:
+                peak = res
+    thr = max(ff * peak, fn * noise_i)
+    nout = 0
+    r0 = r1 = r2s = r3 = r4 = r5 = r6 = r7 = r8 = 0.0
+    for k in range(nr):
+        u = ru[k]
+        v = rv[k]
+        val = rval[k]
+        if val - (pa + pb * u + pc * v) > thr:
+            routl[k] = True
+            nout += 1
+        else:
+            routl[k] = False
+            r0 += 1.0
+            r1 += u
+            r2s += v
+            r3 += u * u
+            r4 += u * v
+            r5 += v * v
+            r6 += val
+            r7 += u * val
+            r8 += v * val
+    if nout > 0 and nr - nout >= 8:
+        pa, pb, pc = _solve_plane(r0, r1, r2s, r3, r4, r5, r6, r7, r8)
+        peak = 0.0
+        if nd > 0:
+            peak = -np.inf
+            for k in range(nd):
+                res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+                if res > peak:
+                    peak = res
+    cut = wfrac * peak if wfrac > 0 else 0.0
+    mass = 0.0
+    sw = swx = swy = 0.0
+    for k in range(nd):
+        res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+        mass += res
+        w = res - cut
+        if w > 0:
+            sw += w
+            swx += w * du[k]
+            swy += w * dv[k]
+    sbg = 0.0
+    nbg = 0
+    for k in range(nr):
+        if not routl[k]:
+            res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
+            sbg += res * res
+            nbg += 1
+    dx = swx / sw if sw > 0 else np.nan
+    dy = swy / sw if sw > 0 else np.nan
+    bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
+    # ring outliers not on the known neighbour's blob: how one-sided, how near
+    fx = dx if sw > 0 else 0.0
+    fy = dy if sw > 0 else 0.0
+    nexp = 0
+    ux = uy = 0.0
+    omin2 = np.inf
+    if nout > 0:
+        for k in range(nr):
+            if routl[k]:
+                u = ru[k]
+                v = rv[k]
+                if near and not np.isnan(rr):
+                    ex_ = u - nx_
+                    ey_ = v - ny_
+                    if ex_ * ex_ + ey_ * ey_ <= rr * rr:
+                        continue
+                nexp += 1
+                ex_ = u - fx
+                ey_ = v - fy
+                dn = np.sqrt(max(ex_ * ex_ + ey_ * ey_, 1e-12))
+                ux += ex_ / dn
+                uy += ey_ / dn
+                d2 = u * u + v * v
+                if d2 < omin2:
+                    omin2 = d2
+    valley = np.nan
+    if near:
+        vmin = np.inf
+        for f in (0.4, 0.5, 0.6):
+            u = int(np.rint(f * nx_))
+            v = int(np.rint(f * ny_))
+            yy = min(max(cy + v, 0), H - 1)
+            xx = min(max(cx + u, 0), W - 1)
+            val = sg * np.float64(frame[yy, xx]) - (pa + pb * u + pc * v)
+            if val < vmin:
+                vmin = val
+        valley = vmin / peak
+    frac = nexp / max(nr, 1) if nexp > 0 else 0.0
+    dip = np.hypot(ux, uy) / nexp if nexp > 0 else 0.0
+    omin = np.sqrt(omin2) if nexp > 0 else np.inf
+    return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley
+
+
+def _buffers(rd):
+    cap = 0
+    for i in range(rd.shape[0]):
+        m = 2 * (int(np.ceil(rd[i])) + 3) + 1
+        cap = max(cap, m * m)
+    return (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.int64),
+            np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.bool_))
+
+
+def _centroid_kernel(frame, ix, iy, rd, sign, nbx, nby, noise, nbr_r, wfrac, ff, fn, out):
+    """Compiled twin of :func:`_centroid_pass`; ``out`` (n, 10) receives dx, dy, mass,
+    peak, nout, frac, dip, omin, bgres, valley."""
+    du, dv, dval, ru, rv, rval, routl = _buffers(rd)
+    for i in range(ix.shape[0]):
+        dx, dy, m, pk, nout, frac, dip, omin, bg, vl = _pass1(
+            frame, ix[i], iy[i], rd[i], sign[i], nbx[i], nby[i], noise[i], nbr_r[i], wfrac, ff, fn,
+            du, dv, dval, ru, rv, rval, routl)
+        out[i, 0] = dx
+        out[i, 1] = dy
+        out[i, 2] = m
+        out[i, 3] = pk
+        out[i, 4] = nout
+        out[i, 5] = frac
+        out[i, 6] = dip
+        out[i, 7] = omin
+        out[i, 8] = bg
+        out[i, 9] = vl
+
+
+def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rmax, wfrac, ff, fn, out):
+    """Compiled twin of :func:`_refine_core` (the iterated centroid of each marker);
+    ``out`` (n, 8) receives x, y, mass, peak, foreign, bgres, valley and the disk radius."""
+    H, W = frame.shape
+    rgrow = np.empty(rd.shape[0])
+    for i in range(rd.shape[0]):
+        rgrow[i] = min(rmax[i], rd[i] + 3.0) if rmax[i] > rd[i] else rd[i]
+    du, dv, dval, ru, rv, rval, routl = _buffers(rgrow)
+    for i in range(x.shape[0]):
+        xi = x[i]
+        yi = y[i]
+        r = rd[i]
+        cx = min(max(int(np.rint(xi)), 0), W - 1)
+        cy = min(max(int(np.rint(yi)), 0), H - 1)
+        it = 0
+        grow = 2
+        mass = peak = bg = valley = np.nan
+        foreign = False
+        while True:
+            nx_ = nbx[i] - cx
+            ny_ = nby[i] - cy
+            res = _pass1(frame, cx, cy, r, sign[i], nx_, ny_, noise[i], nbr_r[i], wfrac, ff, fn,
+                         du, dv, dval, ru, rv, rval, routl)
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl = res
+            good = m > 0
+            if good:
+                xi = cx + dx
+                yi = cy + dy
+            mass = m
+            peak = pk
+            bg = b
+            valley = vl
+            spill = nout > 0 and (frac > 0.4 or dip < 0.5)
+            spill = spill and r + 1.5 <= rmax[i] and grow > 0
+            foreign = nout > 0 and (not spill) and omin <= r + 1.0
+            it += 1
+            kx = min(max(int(np.rint(xi)), 0), W - 1)
+            ky = min(max(int(np.rint(yi)), 0), H - 1)
+            moved = good and (kx != cx or ky != cy) and it < iterations
+            if not (spill or moved):
+                break
+            if spill:
+                r += 1.5
+                grow -= 1
+            cx = kx
+            cy = ky
+        out[i, 0] = xi
+        out[i, 1] = yi
+        out[i, 2] = mass
+        out[i, 3] = peak
+        out[i, 4] = 1.0 if foreign else 0.0
+        out[i, 5] = bg
+        out[i, 6] = valley
+        out[i, 7] = r
+
+
+def _ncc_kernel(frame, tz, tid, th, cx, cy, rr, maps, origin, shape):
+    """Compiled windowed TM_CCOEFF_NORMED (as :func:`match_windows`) with zero-mean,
+    unit-norm templates ``tz[tid]`` (S, S), each (2 th + 1)^2 at the centre of its array."""
+    H, W = frame.shape
+    n = cx.shape[0]
+    c0 = tz.shape[1] // 2
+    for i in range(n):
+        h = th[i]
+        r = rr[i]
+        x0 = max(cx[i] - h - r, 0)
+        y0 = max(cy[i] - h - r, 0)
+        x1 = min(cx[i] + h + r + 1, W)
+        y1 = min(cy[i] + h + r + 1, H)
+        origin[i, 0] = x0 + h
+        origin[i, 1] = y0 + h
+        s = 2 * h + 1
+        rows = y1 - y0 - 2 * h
+        cols = x1 - x0 - 2 * h
+        if rows <= 0 or cols <= 0:
+            shape[i, 0] = 0
+            shape[i, 1] = 0
+            continue
+        shape[i, 0] = rows
+        shape[i, 1] = cols
+        wh = y1 - y0
+        ww = x1 - x0
+        win = np.empty((wh, ww), np.float32)
+        ii = np.zeros((wh + 1, ww + 1))
+        i2 = np.zeros((wh + 1, ww + 1))
+        for a in range(wh):
+            run = 0.0
+            run2 = 0.0
+            for b in range(ww):
+                val = np.float64(frame[y0 + a, x0 + b])
+                win[a, b] = val
+                run += val
+                run2 += val * val
+                ii[a + 1, b + 1] = ii[a, b + 1] + run
+                i2[a + 1, b + 1] = i2[a, b + 1] + run2
+        ti = tid[i]
+        t0 = c0 - h
+        acc = np.zeros((rows, cols), np.float32)
+        for p in range(s):
+            for q in range(s):
+                tv = tz[ti, t0 + p, t0 + q]
+                for a in range(rows):
+                    for b in range(cols):
+                        acc[a, b] += win[a + p, b + q] * tv
+        N = float(s * s)
+        for a in range(rows):
+            for b in range(cols):
+                s1 = ii[a + s, b + s] - ii[a, b + s] - ii[a + s, b] + ii[a, b]
+                s2 = i2[a + s, b + s] - i2[a, b + s] - i2[a + s, b] + i2[a, b]
+                var = s2 - s1 * s1 / N
+                if var > 1e-6 * (s2 + 1.0):
+                    maps[i, a, b] = acc[a, b] / np.sqrt(var)
+                else:
+                    maps[i, a, b] = 0.0
+
+
+def _analyse_kernel(maps, shape, excl, oth, out):
+    """Compiled twin of :func:`_analyse_maps`; ``oth`` (n, K, 2) cells to exclude (NaN
+    none); ``out`` (n, 5) receives u, v, score, second, border."""
+    n, m, _ = maps.shape
+    for i in range(n):
+        rows = shape[i, 0]
+        cols = shape[i, 1]
+        best = -np.inf
+        bu = 0
+        bv = 0
+        for v in range(m):
+            for u in range(m):
+                if maps[i, v, u] > best:
+                    best = maps[i, v, u]
+                    bu = u
+                    bv = v
+        border = bu == 0 or bv == 0 or bu == cols - 1 or bv == rows - 1
+        second = -2.0
+        if m >= 3:
+            ex2 = excl[i] * excl[i]
+            lim = excl[i] + m
+            for v in range(1, rows - 1):
+                for u in range(1, cols - 1):
+                    val = maps[i, v, u]
+                    if val < second:
+                        continue
+                    if (u - bu) * (u - bu) + (v - bv) * (v - bv) <= ex2:
+                        continue
+                    is_max = True
+                    for a in range(-1, 2):
+                        for b in range(-1, 2):
+                            if maps[i, v + a, u + b] > val:
+                                is_max = False
+                    if not is_max:
+                        continue
+                    skip = False
+                    for k in range(oth.shape[1]):
+                        ou = oth[i, k, 0]
+                        ov = oth[i, k, 1]
+                        if np.isnan(ou) or not (abs(ou - m / 2) < lim and abs(ov - m / 2) < lim):
+                            continue
+                        if (u - ou) * (u - ou) + (v - ov) * (v - ov) <= ex2:
+                            skip = True
+                    if not skip:
+                        second = val
+        out[i, 0] = bu
+        out[i, 1] = bv
+        out[i, 2] = best
+        out[i, 3] = second
+        out[i, 4] = 1.0 if border else 0.0
+
+
+def _nearest_kernel(px, py, valid, j, d):
+    """Compiled twin of :func:`_nearest_two` (indices and distances of the two nearest)."""
+    n = px.shape[0]
+    for i in range(n):
+        b0 = b1 = np.inf
+        k0 = k1 = -1
+        if valid[i] and not (np.isnan(px[i]) or np.isnan(py[i])):
+            for q in range(n):
+                if q == i or not valid[q] or np.isnan(px[q]) or np.isnan(py[q]):
+                    continue
+                dx = px[i] - px[q]
+                dy = py[i] - py[q]
+                e = dx * dx + dy * dy
+                if e < b0:
+                    b1, k1 = b0, k0
+                    b0, k0 = e, q
+                elif e < b1:
+                    b1, k1 = e, q
+        j[i, 0] = k0
+        j[i, 1] = k1
+        d[i, 0] = np.sqrt(b0)
+        d[i, 1] = np.sqrt(b1)
+
+
+if _numba is not None:  # pragma: no cover - depends on the environment
+    _analyse_kernel = _numba.njit(cache=True, nogil=True)(_analyse_kernel)
+    _nearest_kernel = _numba.njit(cache=True, nogil=True)(_nearest_kernel)
+    _solve_plane = _numba.njit(cache=True, nogil=True)(_solve_plane)
+    _pass1 = _numba.njit(cache=True, nogil=True)(_pass1)
+    _buffers = _numba.njit(cache=True, nogil=True)(_buffers)
+    _centroid_kernel = _numba.njit(cache=True, nogil=True)(_centroid_kernel)
+    _refine_kernel = _numba.njit(cache=True, nogil=True)(_refine_kernel)
+    _ncc_kernel = _numba.njit(cache=True, nogil=True, fastmath=True)(_ncc_kernel)
+
+
+def _centroid_pass_fast(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
+    """:func:`_centroid_pass` by the compiled kernel (same arguments and result)."""
+    n = len(ix)
+    out = np.empty((n, 10))
+    if nb is None:
+        nbx = nby = np.full(n, np.nan)
+    else:
+        nbx = np.ascontiguousarray(nb[:, 0], dtype=np.float64)
+        nby = np.ascontiguousarray(nb[:, 1], dtype=np.float64)
+    rr = np.full(n, np.nan) if nbr_r is None else np.asarray(nbr_r, np.float64)
+    _centroid_kernel(frame, np.ascontiguousarray(ix, np.int64), np.ascontiguousarray(iy, np.int64),
+                     np.ascontiguousarray(rd, np.float64), np.ascontiguousarray(sign, np.float64), nbx, nby,
+                     np.ascontiguousarray(noise, np.float64), rr, float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out)
+    return dict(d=out[:, :2], mass=out[:, 2], peak=out[:, 3], nout=out[:, 4].astype(np.int64), frac=out[:, 5],
+                dip=out[:, 6], omin=out[:, 7], bgres=out[:, 8], valley=out[:, 9])
+
+
+_CENTROID_PASS = _centroid_pass if _numba is None else _centroid_pass_fast
 
 
 def _find_foreign(frame, ix, iy, rd, sign, peak):
@@ -519,42 +960,24 @@ def _find_foreign(frame, ix, iy, rd, sign, peak):
     return out
 
 
-def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, nbr_r=None,
-            wfrac=WEIGHT_FRACTION, explain=None):
-    """Iterated background-subtracted centroid around estimates (x, y).
-
-    The disk is centred on the pixel nearest the estimate; a further pass is made for the
-    points whose nearest pixel changed, for those whose own blob spills into the
-    background ring all around (the disk then grows by 1.5 px, up to ``rmax``), and for
-    those (``explain``, (n,) bool: points whose identity is not in doubt) with a foreign
-    blob next to them whose centre can be found (:func:`_find_foreign`): it then takes
-    the place of the nearest neighbour in the pixel split, unless a known neighbour is
-    nearer, and the point stays ``foreign`` unless a dark gap (``_MERGE_VALLEY``)
-    separates the two blobs.
-
-    Returns x, y, mass and a dict of per-point diagnostics: ``rd`` (disk radius used),
-    ``rsup``, ``peak`` and ``foreign`` (something bright that is not this blob lies in the
-    ring, touching the disk: the centroid may be pulled).
-    """
+def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac):
+    """Iterated centroid passes (numpy); see :func:`_refine`. Returns x, y, mass, rd,
+    peak, foreign, bgres, valley."""
     x = np.array(x, dtype=np.float64)
     y = np.array(y, dtype=np.float64)
     n = len(x)
     H, W = frame.shape
     rd = np.array(rd, dtype=np.float64)
-    rmax = np.full(n, np.inf) if rmax is None else np.broadcast_to(rmax, (n,))
-    ix = np.rint(x).astype(np.int64)
-    iy = np.rint(y).astype(np.int64)
-    np.clip(ix, 0, W - 1, out=ix)
-    np.clip(iy, 0, H - 1, out=iy)
+    ix = np.clip(np.rint(x).astype(np.int64), 0, W - 1)
+    iy = np.clip(np.rint(y).astype(np.int64), 0, H - 1)
     mass = np.full(n, np.nan)
     peak = np.full(n, np.nan)
     bgres = np.full(n, np.nan)
     valley = np.full(n, np.nan)
     foreign = np.zeros(n, bool)
+    grow = np.full(n, 2)
     todo = np.arange(n)
-    it, grow, nexpl = 0, 2, 1
-    explain = np.zeros(n, bool) if explain is None else np.asarray(explain, bool)
-    explained = np.zeros(n, bool)
+    it = 0
     while True:
         jx, jy = ix[todo], iy[todo]
         nb = None
@@ -571,38 +994,78 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
         # own blob larger than the disk: ring outliers all around (not one-sided); the
         # disk grows, and if the ring is still not clean something else is there
         spill = (r["nout"] > 0) & ((r["frac"] > 0.4) | (r["dip"] < 0.5))
-        spill &= (rd[todo] + 1.5 <= rmax[todo]) & (grow > 0)
+        spill &= (rd[todo] + 1.5 <= rmax[todo]) & (grow[todo] > 0)
         foreign[todo] = (r["nout"] > 0) & ~spill & (r["omin"] <= rd[todo] + 1.0)
         it += 1
-        expl = np.zeros(len(todo), bool)
-        fi = np.flatnonzero(foreign[todo] & good & explain[todo])
-        if fi.size and nexpl > 0:
-            nexpl -= 1
-            rows = todo[fi]
-            f = _find_foreign(frame, jx[fi], jy[fi], rd[rows], sign[rows], peak[rows])
-            use = np.isfinite(f[:, 0])
-            if nbr_xy is not None:
-                dk = np.hypot(nbr_xy[rows, 0] - jx[fi], nbr_xy[rows, 1] - jy[fi])
-                use &= ~(dk <= np.hypot(f[:, 0] - jx[fi], f[:, 1] - jy[fi]))
-            if use.any():
-                nbr_xy = np.full((n, 2), np.nan) if nbr_xy is None else np.array(nbr_xy, dtype=np.float64)
-                nbr_r = np.full(n, np.nan) if nbr_r is None else np.array(nbr_r, dtype=np.float64)
-                nbr_xy[rows[use]] = f[use]
-                nbr_r[rows[use]] = rd[rows[use]]
-                expl[fi[use]] = True
-                explained[rows[use]] = True
         kx = np.clip(np.rint(nx).astype(np.int64), 0, W - 1)
         ky = np.clip(np.rint(ny).astype(np.int64), 0, H - 1)
-        redo = spill | expl | (good & ((kx != jx) | (ky != jy)) & (it < iterations))
+        redo = spill | (good & ((kx != jx) | (ky != jy)) & (it < iterations))
         if not redo.any():
             break
-        if spill.any():
-            rd[todo[spill]] += 1.5
-            grow -= 1
+        rd[todo[spill]] += 1.5
+        grow[todo[spill]] -= 1
         todo = todo[redo]
         ix[todo], iy[todo] = kx[redo], ky[redo]
-    # a foreign blob split off is only harmless when a dark gap separates the two
-    foreign |= explained & ~(valley < _MERGE_VALLEY)
+    return x, y, mass, rd, peak, foreign, bgres, valley
+
+
+def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac):
+    """:func:`_refine_core` by the compiled kernel."""
+    n = len(x)
+    out = np.empty((n, 8))
+    if nbr_xy is None:
+        nbx = nby = np.full(n, np.nan)
+    else:
+        nbx = np.ascontiguousarray(nbr_xy[:, 0], dtype=np.float64)
+        nby = np.ascontiguousarray(nbr_xy[:, 1], dtype=np.float64)
+    rr = np.full(n, np.nan) if nbr_r is None else np.ascontiguousarray(nbr_r, dtype=np.float64)
+    _refine_kernel(frame, np.asarray(x, np.float64), np.asarray(y, np.float64), np.asarray(rd, np.float64),
+                   np.asarray(sign, np.float64), np.asarray(noise, np.float64), nbx, nby, rr, int(iterations),
+                   np.asarray(rmax, np.float64), float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out)
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 7], out[:, 3], out[:, 4] > 0, out[:, 5], out[:, 6]
+
+
+def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, nbr_r=None,
+            wfrac=WEIGHT_FRACTION, explain=None):
+    """Iterated background-subtracted centroid around estimates (x, y).
+
+    The disk is centred on the pixel nearest the estimate; a further pass is made for the
+    points whose nearest pixel changed and for those whose own blob spills into the
+    background ring all around (the disk then grows by 1.5 px, twice at most, up to
+    ``rmax``). Then, for the points (``explain``, (n,) bool: points whose identity is not
+    in doubt) with a foreign blob next to them whose centre can be found
+    (:func:`_find_foreign`), that blob takes the place of the nearest neighbour in the
+    pixel split (unless a known neighbour is nearer) for one more pass, and the point
+    stays ``foreign`` unless a dark gap (``_MERGE_VALLEY``) separates the two blobs.
+
+    Returns x, y, mass and a dict of per-point diagnostics: ``rd`` (disk radius used),
+    ``peak``, ``bgres``, ``valley`` and ``foreign`` (something bright that is not this
+    blob lies in the ring, touching the disk: the centroid may be pulled).
+    """
+    n = len(x)
+    rmax = np.asarray(rd, np.float64) if rmax is None else np.broadcast_to(np.asarray(rmax, np.float64), (n,))
+    core = _refine_core if _numba is None else _refine_core_fast
+    x, y, mass, rd, peak, foreign, bgres, valley = core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations,
+                                                        rmax, wfrac)
+    if explain is not None:
+        rows = np.flatnonzero(foreign & (mass > 0) & np.asarray(explain, bool))
+        if rows.size:
+            H, W = frame.shape
+            jx = np.clip(np.rint(x[rows]).astype(np.int64), 0, W - 1)
+            jy = np.clip(np.rint(y[rows]).astype(np.int64), 0, H - 1)
+            f = _find_foreign(frame, jx, jy, rd[rows], np.asarray(sign, np.float64)[rows], peak[rows])
+            use = np.isfinite(f[:, 0])
+            if nbr_xy is not None:
+                dk = np.hypot(nbr_xy[rows, 0] - jx, nbr_xy[rows, 1] - jy)
+                use &= ~(dk <= np.hypot(f[:, 0] - jx, f[:, 1] - jy))
+            rows, f = rows[use], f[use]
+            if rows.size:
+                r2 = core(frame, x[rows], y[rows], rd[rows], np.asarray(sign)[rows], np.asarray(noise)[rows], f,
+                          rd[rows], 1, rd[rows], wfrac)
+                x[rows], y[rows], mass[rows], rd[rows], peak[rows] = r2[0], r2[1], r2[2], r2[3], r2[4]
+                bgres[rows], valley[rows] = r2[6], r2[7]
+                # a foreign blob split off is only harmless when a dark gap separates them
+                foreign[rows] = r2[5] | ~(r2[7] < _MERGE_VALLEY)
     return x, y, mass, dict(rd=rd, peak=peak, foreign=foreign, bgres=bgres, valley=valley)
 
 
@@ -767,6 +1230,13 @@ def _analyse_maps(maps, shape, excl, others=()):
         runner-up search (other markers' expected positions), NaN for none.
     """
     n, m, _ = maps.shape
+    if _numba is not None:
+        oth = np.full((n, max(len(others), 1), 2), np.nan)
+        for q, o in enumerate(others):
+            oth[:, q] = o
+        out = np.empty((n, 5))
+        _analyse_kernel(maps, shape, np.asarray(excl, np.float64), oth, out)
+        return out[:, 0].astype(np.int64), out[:, 1].astype(np.int64), out[:, 2], out[:, 3], out[:, 4] > 0
     flat = maps.reshape(n, -1)
     k = flat.argmax(1)
     score = flat[np.arange(n), k].astype(np.float64)
@@ -818,6 +1288,11 @@ def _nearest_two(px, py, valid):
     n = len(px)
     if n < 2:
         return np.full((n, 2), -1), np.full((n, 2), np.inf), None
+    if _numba is not None:
+        j = np.empty((n, 2), np.int64)
+        d = np.empty((n, 2))
+        _nearest_kernel(np.asarray(px, np.float64), np.asarray(py, np.float64), np.asarray(valid, np.bool_), j, d)
+        return j, d, None
     ok = valid & np.isfinite(px) & np.isfinite(py)
     x = np.where(ok, px, 0.0)
     y = np.where(ok, py, 0.0)
@@ -1198,6 +1673,7 @@ class _Tracker:
         edge = inside & ~fits
         # neighbours, from one distance matrix of the predictions
         j2, d2 = self._neighbours(prx, pry, inside)
+        self._j2 = j2
         jn = j2[:, 0]
         dn = d2[:, 0]
         merged = (dn < rb + rb[np.maximum(jn, 0)] + 1.0) & inside
@@ -1355,7 +1831,7 @@ class _Tracker:
         # coasting, but not onto a neighbour's or an unpicked marker's blob
         okm = ST == OK
         rel = okm | ((ST == FLAGGED) & (RS == _R["edge"]))
-        soft = np.flatnonzero((ST == FLAGGED) & np.isin(RS, _SOFT))
+        soft = np.flatnonzero((ST == FLAGGED) & _IS_SOFT[RS])
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
         ri = np.flatnonzero(rel)
@@ -1423,10 +1899,11 @@ class _Tracker:
         """
         px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
         py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
-        ok = np.isfinite(px)
-        j, d = self._neighbours(px, py, ok)
-        jn = np.maximum(j[:, 0], 0)
-        touch = ok & (j[:, 0] >= 0) & (d[:, 0] < self.rb + self.rb[jn] + 1.0)
+        # the two nearest by prediction are the candidates (the nearest by match is one)
+        j = np.maximum(self._j2, 0)
+        d = np.hypot(px[j] - px[:, None], py[j] - py[:, None])
+        d[self._j2 < 0] = np.inf
+        touch = (d < self.rb[:, None] + self.rb[j] + 1.0).any(1)
         # (and whatever the radii, a bright bridge to the neighbour is a merge)
         return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
 
@@ -1606,8 +2083,30 @@ class _Tracker:
         self.to = o
         self.tcount = self.tmask.sum(1)
 
+    def _match(self, frame, idx, centres, radii):
+        """Windowed correlation of markers ``idx`` (:func:`match_windows`; compiled when
+        numba is available, with the unrounded templates)."""
+        if _numba is None:
+            return match_windows(frame, [self.tplu[i] for i in idx], centres, radii)
+        centres = np.asarray(centres, np.int64).reshape(-1, 2)
+        radii = np.asarray(radii, np.int64).reshape(-1)
+        n = len(centres)
+        m = 2 * int(radii.max()) + 1 if n else 1
+        maps = np.full((n, m, m), -2.0, np.float32)
+        origin = np.zeros((n, 2), np.int64)
+        shape = np.zeros((n, 2), np.int64)
+        if n:
+            idx = np.asarray(idx, np.int64)
+            _ncc_kernel(frame, self.tz, idx, self.h[idx], np.ascontiguousarray(centres[:, 0]),
+                        np.ascontiguousarray(centres[:, 1]), radii, maps, origin, shape)
+        return maps, origin, shape
+
     def _score_at(self, frame, idx, cx, cy):
         """TM_CCOEFF_NORMED of each template centred at integer pixels (cx, cy)."""
+        if _numba is not None:
+            c = np.column_stack([cx, cy]).astype(np.int64)
+            maps, _, shp = self._match(frame, idx, c, np.zeros(len(idx), np.int64))
+            return np.where(shp[:, 0] > 0, maps[:, 0, 0], 0.0).astype(np.float64)
         I = _gather(frame, cx.astype(np.int64), cy.astype(np.int64), self.to)
         m = self.tmask[idx]
         s1 = np.einsum("ij,ij->i", I, m)
@@ -1623,8 +2122,7 @@ class _Tracker:
         p = self.p
         ci = np.column_stack([px[idx], py[idx]]).astype(np.int64)
         ri = r[idx]
-        tpls = self.tplu
-        maps, origin, shp = match_windows(frame, [tpls[i] for i in idx], ci, ri)
+        maps, origin, shp = self._match(frame, idx, ci, ri)
         others = []
         for k in range(2):
             jj = j2[idx, k]
@@ -1639,7 +2137,7 @@ class _Tracker:
         redo = np.flatnonzero(border & full & (ri < p.search_radius))
         if redo.size:
             r2 = np.minimum(2 * ri[redo] + 2, p.search_radius)
-            m2, o2, s2 = match_windows(frame, [tpls[i] for i in idx[redo]], ci[redo], r2)
+            m2, o2, s2 = self._match(frame, idx[redo], ci[redo], r2)
             oth2 = [o[redo] + (origin[redo] - o2) for o in others]
             a = _analyse_maps(m2, s2, excl[redo], oth2)
             u[redo], v[redo], score[redo], second[redo] = a[0], a[1], a[2], a[3]
@@ -1712,7 +2210,7 @@ class _Tracker:
         cur = np.column_stack([ax, ay])
         cur[idx[redo]] = q
         j3, _, _ = _nearest_two(cur[:, 0], cur[:, 1], np.isfinite(cur[:, 0]))
-        m3, o3, s3 = match_windows(frame, [self.tplu[i] for i in idx[redo]], qi, np.full(redo.size, 4))
+        m3, o3, s3 = self._match(frame, idx[redo], qi, np.full(redo.size, 4))
         oth3 = []
         for k in range(2):
             jj = j3[idx[redo], k]
@@ -1834,7 +2332,7 @@ class _Tracker:
             hh = int(self.h[i])
             if ci[0] - hh < 0 or ci[1] - hh < 0 or ci[0] + hh > self.W - 1 or ci[1] + hh > self.H - 1:
                 continue
-            maps, origin, shp = match_windows(frame, [self.tplu[i]], ci[None, :], [rad])
+            maps, origin, shp = self._match(frame, np.array([i]), ci[None, :], [rad])
             m = maps.shape[1]
             ex = max(2.0, float(self.rb[i]))
             g = _GRID[:m]
