@@ -172,6 +172,8 @@ REASONS = (
     "background",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
+_RULE_CODES = np.array([_R[k] for k in ("low_score", "no_signal", "merged", "appearance", "ambiguous", "jump",
+                                        "foreign", "background", "conflict")], np.int8)
 #: Flags about a point's precision, not its identity.
 _SOFT = np.array([_R[k] for k in ("merged", "foreign", "background")], np.int8)
 _IS_SOFT = np.isin(np.arange(len(REASONS)), _SOFT)
@@ -529,43 +531,54 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     R2 = (r + 2.0) * (r + 2.0)
     nd = 0
     nr = 0
-    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
     inside = cx - hc >= 0 and cy - hc >= 0 and cx + hc <= W - 1 and cy + hc <= H - 1
     for v in range(-hc, hc + 1):
-        yy = min(max(cy + v, 0), H - 1)
         rem = R2 - v * v
         if rem < 0:
             continue
+        yy = min(max(cy + v, 0), H - 1)
+        fv = np.float64(v)
         uw = int(np.sqrt(rem))
+        # the disk's span on this row
+        remd = r2 - v * v
+        ud = int(np.sqrt(remd)) if remd >= 0 else -1
+        if ud >= 0 and (ud + 1) * (ud + 1) + v * v <= r2:
+            ud += 1
+        while uw >= 0 and uw * uw + v * v > R2:
+            uw -= 1
+        while ud >= 0 and ud * ud + v * v > r2:
+            ud -= 1
         for u in range(-uw, uw + 1):
-            d2 = u * u + v * v
-            if d2 > R2:
-                continue
             if near and not (nx_ * u + ny_ * v < half):
                 continue
             if inside:
                 val = sg * np.float64(frame[yy, cx + u])
             else:
                 val = sg * np.float64(frame[yy, min(max(cx + u, 0), W - 1)])
-            if d2 <= r2:
+            if -ud <= u <= ud:
                 du[nd] = u
-                dv[nd] = v
+                dv[nd] = fv
                 dval[nd] = val
                 nd += 1
             else:
                 ru[nr] = u
-                rv[nr] = v
+                rv[nr] = fv
                 rval[nr] = val
                 nr += 1
-                s0 += 1.0
-                sx += u
-                sy += v
-                sxx += u * u
-                sxy += u * v
-                syy += v * v
-                si += val
-                sxi += u * val
-                syi += v * val
+    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
+    for k in range(nr):
+        u = ru[k]
+        v = rv[k]
+        val = rval[k]
+        s0 += 1.0
+        sx += u
+        sy += v
+        sxx += u * u
+        sxy += u * v
+        syy += v * v
+        si += val
+        sxi += u * val
+        syi += v * val
     pa, pb, pc = _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
     peak = 0.0
     if nd > 0:
@@ -586,16 +599,21 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
             nout += 1
         else:
             routl[k] = False
-            r0 += 1.0
-            r1 += u
-            r2s += v
-            r3 += u * u
-            r4 += u * v
-            r5 += v * v
-            r6 += val
-            r7 += u * val
-            r8 += v * val
     if nout > 0 and nr - nout >= 8:
+        for k in range(nr):
+            if not routl[k]:
+                u = ru[k]
+                v = rv[k]
+                val = rval[k]
+                r0 += 1.0
+                r1 += u
+                r2s += v
+                r3 += u * u
+                r4 += u * v
+                r5 += v * v
+                r6 += val
+                r7 += u * val
+                r8 += v * val
         pa, pb, pc = _solve_plane(r0, r1, r2s, r3, r4, r5, r6, r7, r8)
         peak = 0.0
         if nd > 0:
@@ -654,11 +672,11 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     if near:
         vmin = np.inf
         for f in (0.4, 0.5, 0.6):
-            u = int(np.rint(f * nx_))
-            v = int(np.rint(f * ny_))
-            yy = min(max(cy + v, 0), H - 1)
-            xx = min(max(cx + u, 0), W - 1)
-            val = sg * np.float64(frame[yy, xx]) - (pa + pb * u + pc * v)
+            iu = int(np.rint(f * nx_))
+            iv = int(np.rint(f * ny_))
+            yy = min(max(cy + iv, 0), H - 1)
+            xx = min(max(cx + iu, 0), W - 1)
+            val = sg * np.float64(frame[yy, xx]) - (pa + pb * iu + pc * iv)
             if val < vmin:
                 vmin = val
         valley = vmin / peak
@@ -673,8 +691,8 @@ def _buffers(rd):
     for i in range(rd.shape[0]):
         m = 2 * (int(np.ceil(rd[i])) + 3) + 1
         cap = max(cap, m * m)
-    return (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.int64),
-            np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.bool_))
+    return (np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap),
+            np.empty(cap, np.bool_))
 
 
 def _centroid_kernel(frame, ix, iy, rd, sign, nbx, nby, noise, nbr_r, wfrac, ff, fn, out):
@@ -794,23 +812,316 @@ def _ncc_kernel(frame, tz, tid, th, cx, cy, rr, maps, origin, shape):
                 i2[a + 1, b + 1] = i2[a, b + 1] + run2
         ti = tid[i]
         t0 = c0 - h
-        acc = np.zeros((rows, cols), np.float32)
+        tp = np.empty((s, s), np.float32)
         for p in range(s):
             for q in range(s):
-                tv = tz[ti, t0 + p, t0 + q]
-                for a in range(rows):
-                    for b in range(cols):
-                        acc[a, b] += win[a + p, b + q] * tv
+                tp[p, q] = tz[ti, t0 + p, t0 + q]
         N = float(s * s)
         for a in range(rows):
             for b in range(cols):
+                acc = np.float32(0.0)
+                for p in range(s):
+                    for q in range(s):
+                        acc += win[a + p, b + q] * tp[p, q]
                 s1 = ii[a + s, b + s] - ii[a, b + s] - ii[a + s, b] + ii[a, b]
                 s2 = i2[a + s, b + s] - i2[a, b + s] - i2[a + s, b] + i2[a, b]
                 var = s2 - s1 * s1 / N
                 if var > 1e-6 * (s2 + 1.0):
-                    maps[i, a, b] = acc[a, b] / np.sqrt(var)
+                    maps[i, a, b] = acc / np.sqrt(var)
                 else:
                     maps[i, a, b] = 0.0
+
+
+def _score_kernel(frame, tz, tid, th, cx, cy, out):
+    """TM_CCOEFF_NORMED of template ``tz[tid[i]]`` centred at pixel (cx, cy) (0 where it
+    does not fit in the image or the window is flat)."""
+    H, W = frame.shape
+    c0 = tz.shape[1] // 2
+    for i in range(cx.shape[0]):
+        h = th[i]
+        x0 = cx[i] - h
+        y0 = cy[i] - h
+        s = 2 * h + 1
+        if x0 < 0 or y0 < 0 or x0 + s > W or y0 + s > H:
+            out[i] = 0.0
+            continue
+        ti = tid[i]
+        t0 = c0 - h
+        s1 = s2 = num = 0.0
+        for p in range(s):
+            for q in range(s):
+                val = np.float64(frame[y0 + p, x0 + q])
+                s1 += val
+                s2 += val * val
+                num += val * tz[ti, t0 + p, t0 + q]
+        var = s2 - s1 * s1 / (s * s)
+        out[i] = num / np.sqrt(var) if var > 1e-6 * (s2 + 1.0) else 0.0
+
+
+def _score1(frame, tz, ti, h, x, y):
+    """TM_CCOEFF_NORMED of template ``tz[ti]`` centred at pixel (x, y); -2 off the image."""
+    H, W = frame.shape
+    c0 = tz.shape[1] // 2
+    x0 = x - h
+    y0 = y - h
+    s = 2 * h + 1
+    if x0 < 0 or y0 < 0 or x0 + s > W or y0 + s > H:
+        return -2.0
+    t0 = c0 - h
+    s1 = s2 = num = 0.0
+    for p in range(s):
+        for q in range(s):
+            val = np.float64(frame[y0 + p, x0 + q])
+            s1 += val
+            s2 += val * val
+            num += val * tz[ti, t0 + p, t0 + q]
+    var = s2 - s1 * s1 / (s * s)
+    return num / np.sqrt(var) if var > 1e-6 * (s2 + 1.0) else 0.0
+
+
+def _climb_kernel(frame, tz, tid, th, cx, cy, rr, out):
+    """Hill-climb the correlation from the predicted pixel (cx, cy) within +/- rr px:
+    the local maximum nearest the prediction, at a fraction of a full window's cost.
+    ``out`` (n, 4): x, y, score, rim (1 where the climb reached the window's edge)."""
+    for i in range(cx.shape[0]):
+        h = th[i]
+        ti = tid[i]
+        x = cx[i]
+        y = cy[i]
+        best = _score1(frame, tz, ti, h, x, y)
+        for _ in range(4 * rr[i] + 4):
+            bx = x
+            by = y
+            bs = best
+            for a in range(-1, 2):
+                for b in range(-1, 2):
+                    if a == 0 and b == 0:
+                        continue
+                    nx = x + b
+                    ny = y + a
+                    if abs(nx - cx[i]) > rr[i] or abs(ny - cy[i]) > rr[i]:
+                        continue
+                    sc = _score1(frame, tz, ti, h, nx, ny)
+                    if sc > bs:
+                        bs = sc
+                        bx = nx
+                        by = ny
+            if bx == x and by == y:
+                break
+            x = bx
+            y = by
+            best = bs
+        out[i, 0] = x
+        out[i, 1] = y
+        out[i, 2] = best
+        out[i, 3] = 1.0 if (abs(x - cx[i]) == rr[i] or abs(y - cy[i]) == rr[i]) else 0.0
+
+
+def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, wfrac, ff, fn, X, Y, mass,
+                       foreign, bgres, peak, valley, nbr_out):
+    """The tracker's refinement of markers ``idx`` in one call: each marker's pixel split
+    against its nearest matched neighbour (as :meth:`_Tracker._voronoi`) and its iterated
+    centroid (as :func:`_refine_core`, the disk fixed), results written at ``idx``."""
+    H, W = frame.shape
+    sub = np.empty(idx.shape[0])
+    for k in range(idx.shape[0]):
+        sub[k] = rd[idx[k]]
+    du, dv, dval, ru, rv, rval, routl = _buffers(sub)
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        j = jn[i]
+        nxa = nya = np.nan
+        rr = np.nan
+        if j >= 0:
+            rr = rd[j] + 0.5
+            if not np.isnan(XP[j]):
+                dn = np.hypot(XP[j] - XP[i], YP[j] - YP[i])
+                if dn < rd[i] + 3.0 + rb[j] and dn >= 1.5:
+                    nxa = XP[j]
+                    nya = YP[j]
+        nbr_out[i, 0] = nxa
+        nbr_out[i, 1] = nya
+        xi = XP[i]
+        yi = YP[i]
+        r = rd[i]
+        cx = min(max(int(np.rint(xi)), 0), W - 1)
+        cy = min(max(int(np.rint(yi)), 0), H - 1)
+        it = 0
+        while True:
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl = _pass1(
+                frame, cx, cy, r, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
+                du, dv, dval, ru, rv, rval, routl)
+            good = m > 0
+            if good:
+                xi = cx + dx
+                yi = cy + dy
+            mass[i] = m
+            peak[i] = pk
+            bgres[i] = b
+            valley[i] = vl
+            foreign[i] = nout > 0 and omin <= r + 1.0
+            it += 1
+            kx = min(max(int(np.rint(xi)), 0), W - 1)
+            ky = min(max(int(np.rint(yi)), 0), H - 1)
+            if not (good and (kx != cx or ky != cy) and it < iterations):
+                break
+            cx = kx
+            cy = ky
+        X[i] = xi
+        Y[i] = yi
+
+
+def _pre_kernel(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+                search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded):
+    """Compiled start of :meth:`_Tracker.step`: predictions (as :meth:`_Tracker.predict`),
+    gaps, newly lost markers, window fits, nearest neighbours of the predictions, merged
+    and crowded markers, the fast path and the search radii (in-place outputs)."""
+    n = h.shape[0]
+    tf = np.float64(t)
+    for i in range(n):
+        t0 = ht[i, 0]
+        t1 = ht[i, 1]
+        t2 = ht[i, 2]
+        d = abs(t - t0)
+        gap[i] = d
+        order = nh[i]
+        if d > 3:
+            order = min(order, 2)
+        if d > 8:
+            order = 1
+        a0 = np.float64(t0)
+        a1 = np.float64(t1)
+        a2 = np.float64(t2)
+        if order == 3:
+            c0 = (tf - a1) * (tf - a2) / ((a0 - a1) * (a0 - a2))
+            c1 = (tf - a0) * (tf - a2) / ((a1 - a0) * (a1 - a2))
+            c2 = (tf - a0) * (tf - a1) / ((a2 - a0) * (a2 - a1))
+            pred[i, 0] = c0 * hx[i, 0, 0] + c1 * hx[i, 1, 0] + c2 * hx[i, 2, 0]
+            pred[i, 1] = c0 * hx[i, 0, 1] + c1 * hx[i, 1, 1] + c2 * hx[i, 2, 1]
+        elif order == 2:
+            c0 = (tf - a1) / (a0 - a1)
+            c1 = (tf - a0) / (a1 - a0)
+            pred[i, 0] = c0 * hx[i, 0, 0] + c1 * hx[i, 1, 0]
+            pred[i, 1] = c0 * hx[i, 0, 1] + c1 * hx[i, 1, 1]
+        else:
+            pred[i, 0] = hx[i, 0, 0]
+            pred[i, 1] = hx[i, 0, 1]
+        steady[i] = d == 1 and nh[i] == 3 and abs(t - last_ok[i]) == 1
+        if not lostflag[i] and d > max_coast:
+            lostflag[i] = True
+        x = pred[i, 0]
+        y = pred[i, 1]
+        ins = (not lostflag[i]) and x >= -0.5 and x <= W - 0.5 and y >= -0.5 and y <= H - 0.5
+        inside[i] = ins
+        px = np.rint(x) if ins else 0.0
+        py = np.rint(y) if ins else 0.0
+        fits[i] = ins and px - h[i] >= 0 and py - h[i] >= 0 and px + h[i] <= W - 1 and py + h[i] <= H - 1
+    _nearest_kernel(pred[:, 0], pred[:, 1], inside, j2, d2)
+    for i in range(n):
+        j = j2[i, 0]
+        lim = rb[i] + rb[max(j, 0)]
+        merged[i] = inside[i] and d2[i, 0] < lim + 1.0
+        crowded[i] = d2[i, 0] < lim + 4.0
+        F[i] = (fits[i] and nh[i] == 3 and gap[i] == 1 and sigma[i] < 0.35 and last_score[i] >= 0.9
+                and not crowded[i] and stagger[i] != t % every)
+        ri = np.ceil(2.0 + 3.0 * sigma[i] + (gap[i] - 1))
+        ri = min(max(ri, 2.0), np.float64(search_radius))
+        wide[i] = fits[i] and nh[i] == 1
+        r[i] = search_radius if wide[i] else int(ri)
+
+
+def _rules_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, bgres, peak,
+                  peak0, XP, YP, prx, pry, inside, j2, rb, valley, lose, par, ST, RS, X, Y, codes):
+    """Compiled status rules of :meth:`_Tracker.step` (the last rule that applies wins),
+    then a conflict loser is put at its prediction and a lost point's position cleared.
+    ``par``: min_score, lost_score, min_mass_ratio, max_mass_ratio, max_score_drop,
+    ambiguity_margin, jump_px, bg residual, faded bg residual, faded, weak, merge valley,
+    bridge; ``codes``: the reason codes of low_score, no_signal, merged, appearance,
+    ambiguous, jump, foreign, background, conflict."""
+    n = fits.shape[0]
+    for i in range(n):
+        if not fits[i]:
+            continue
+        sc = S[i]
+        ms = mass[i]
+        st = 0
+        rs = 0
+        if sc < par[0]:
+            st, rs = 1, codes[0]
+        if ms < par[2] * mass0[i]:
+            st, rs = 1, codes[1]
+        if np.isfinite(par[3]) and ms > par[3] * mass_ref[i]:
+            st, rs = 1, codes[2]
+        if np.isfinite(par[4]) and sc < score_ref[i] - par[4]:
+            st, rs = 1, codes[3]
+        if SEC[i] >= sc - par[5]:
+            st, rs = 1, codes[4]
+        lim = max(par[6], 4.0 * sigma[i] + 2.0 * (gap[i] - 1))
+        if nh[i] >= 3 and resid[i] > lim:
+            st, rs = 1, codes[5]
+        if foreign[i]:
+            st, rs = 1, codes[6]
+        bg = bgres[i]
+        faded = peak[i] < par[9] * peak0[i] or sc < par[10]
+        if bg > par[7] or (faded and bg > par[8]):
+            st, rs = 1, codes[7]
+        # blobs touching a neighbour's (matched, or predicted if tracked last frame)
+        touch = False
+        xi = XP[i] if not np.isnan(XP[i]) else (prx[i] if inside[i] and gap[i] == 1 else np.nan)
+        yi = YP[i] if not np.isnan(YP[i]) else (pry[i] if inside[i] and gap[i] == 1 else np.nan)
+        for k in range(2):
+            j = j2[i, k]
+            if j < 0:
+                continue
+            xj = XP[j] if not np.isnan(XP[j]) else (prx[j] if inside[j] and gap[j] == 1 else np.nan)
+            yj = YP[j] if not np.isnan(YP[j]) else (pry[j] if inside[j] and gap[j] == 1 else np.nan)
+            if np.hypot(xj - xi, yj - yi) < rb[i] + rb[j] + 1.0:
+                touch = True
+        vl = valley[i]
+        if (touch and not (vl < par[11])) or vl > par[12]:
+            st, rs = 1, codes[2]
+        if lose[i]:
+            st, rs = 1, codes[8]
+        if ((sc < par[1]) or not (ms > 0)) and not lose[i]:
+            st, rs = 2, codes[0]
+        ST[i] = st
+        RS[i] = rs
+        if lose[i]:
+            X[i] = prx[i]
+            Y[i] = pry[i]
+        if st == 2:
+            X[i] = np.nan
+            Y[i] = np.nan
+
+
+def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref,
+                    score_ref, last_upd, par, upd):
+    """Compiled end of :meth:`_Tracker.step`: the motion model fed with the points ``rel``
+    (history shift, count, residual RMS), the running values of the ok points, and which
+    templates to update (``par``: update_score, refresh_below, update_every)."""
+    for i in range(X.shape[0]):
+        ok = ST[i] == 0
+        if rel[i]:
+            if nh[i] >= 2:
+                e = resid[i]
+                sigma[i] = np.sqrt(0.8 * sigma[i] * sigma[i] + 0.2 * e * e)
+            hx[i, 2, 0] = hx[i, 1, 0]
+            hx[i, 2, 1] = hx[i, 1, 1]
+            hx[i, 1, 0] = hx[i, 0, 0]
+            hx[i, 1, 1] = hx[i, 0, 1]
+            hx[i, 0, 0] = X[i]
+            hx[i, 0, 1] = Y[i]
+            ht[i, 2] = ht[i, 1]
+            ht[i, 1] = ht[i, 0]
+            ht[i, 0] = t
+            nh[i] = min(nh[i] + 1, 3)
+        last_score[i] = S[i] if ok and not np.isnan(S[i]) else 0.0
+        upd[i] = False
+        if ok:
+            last_ok[i] = t
+            mass_ref[i] = 0.9 * mass_ref[i] + 0.1 * mass[i]
+            score_ref[i] = 0.7 * score_ref[i] + 0.3 * S[i]
+            upd[i] = S[i] >= par[0] and S[i] < par[1] and abs(t - last_upd[i]) >= par[2]
 
 
 def _analyse_kernel(maps, shape, excl, oth, out):
@@ -891,6 +1202,13 @@ def _nearest_kernel(px, py, valid, j, d):
 
 if _numba is not None:  # pragma: no cover - depends on the environment
     _analyse_kernel = _numba.njit(cache=True, nogil=True)(_analyse_kernel)
+    _pre_kernel = _numba.njit(cache=True, nogil=True)(_pre_kernel)
+    _rules_kernel = _numba.njit(cache=True, nogil=True)(_rules_kernel)
+    _history_kernel = _numba.njit(cache=True, nogil=True)(_history_kernel)
+    _score_kernel = _numba.njit(cache=True, nogil=True)(_score_kernel)
+    _score1 = _numba.njit(cache=True, nogil=True)(_score1)
+    _climb_kernel = _numba.njit(cache=True, nogil=True)(_climb_kernel)
+    _refine_all_kernel = _numba.njit(cache=True, nogil=True)(_refine_all_kernel)
     _nearest_kernel = _numba.njit(cache=True, nogil=True)(_nearest_kernel)
     _solve_plane = _numba.njit(cache=True, nogil=True)(_solve_plane)
     _pass1 = _numba.njit(cache=True, nogil=True)(_pass1)
@@ -1516,6 +1834,7 @@ class _Tracker:
             nz[i] = noise
             sign[i] = s
         self.sign = sign
+        self.sign64 = sign.astype(np.float64)
         self.rb = rb
         self.noise = nz
         self.rd = np.minimum(rb + _RD_MARGIN, _RD_MAX)
@@ -1620,6 +1939,7 @@ class _Tracker:
         self.tplu = [None] * len(s)
         self._init_stack()
         self._set_local()
+        self.sign64 = np.asarray(self.sign, np.float64)
         return self
 
     # ------------------------------------------------------------ prediction
@@ -1655,37 +1975,52 @@ class _Tracker:
         H, W = self.H, self.W
         n = len(self.h)
         h = self.h
-        rb = self.rb
-        pred = self.predict(t)
-        gap = np.abs(t - self.hist_t[:, 0])
+        if _numba is not None:
+            pred, gap, steady = np.empty((n, 2)), np.empty(n, np.int64), np.empty(n, np.bool_)
+            inside, fits, F, wide = (np.empty(n, np.bool_) for _ in range(4))
+            merged, crowded = np.empty(n, np.bool_), np.empty(n, np.bool_)
+            r = np.empty(n, np.int64)
+            j2, d2 = np.empty((n, 2), np.int64), np.empty((n, 2))
+            _pre_kernel(t, self.hist_x, self.hist_t, self.nh, self.sigma, self.lostflag, self.last_ok,
+                        self.last_score, self.stagger, h, self.rb, W, H, p.max_coast, p.search_every,
+                        p.search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded)
+            prx, pry = pred[:, 0], pred[:, 1]
+            px = np.rint(prx)
+            py = np.rint(pry)
+            track = ~self.lostflag
+        else:
+            pred = self.predict(t)
+            gap = np.abs(t - self.hist_t[:, 0])
+            steady = (gap == 1) & (self.nh == 3) & (np.abs(t - self.last_ok) == 1)
+            newly = ~self.lostflag & (gap > p.max_coast)
+            if newly.any():
+                self.lostflag |= newly
+            track = ~self.lostflag
+            prx, pry = pred[:, 0], pred[:, 1]
+            inside = track & (prx >= -0.5) & (prx <= W - 0.5) & (pry >= -0.5) & (pry <= H - 0.5)
+            px = np.rint(prx)
+            py = np.rint(pry)
+            fits = inside & (px - h >= 0) & (py - h >= 0) & (px + h <= W - 1) & (py + h <= H - 1)
+            # neighbours, from one distance matrix of the predictions
+            j2, d2 = self._neighbours(prx, pry, inside)
+            rb = self.rb
+            jn0 = np.maximum(j2[:, 0], 0)
+            merged = (d2[:, 0] < rb + rb[jn0] + 1.0) & inside
+            crowded = d2[:, 0] < rb + rb[jn0] + 4.0
+            # fast path: a marker moving predictably, alone, confidently matched last frame
+            # is refined at its prediction and verified, its NCC search skipped this frame
+            F = (fits & (self.nh == 3) & (gap == 1) & (self.sigma < 0.35) & (self.last_score >= 0.9)
+                 & ~crowded & (self.stagger != t % p.search_every))
+            r = np.clip(np.ceil(2.0 + 3.0 * self.sigma + (gap - 1)), 2, p.search_radius).astype(np.int64)
+            wide = fits & (self.nh == 1)
+            r[wide] = p.search_radius
+        edge = inside & ~fits
         self._gap = gap
         self._pred = pred
-        self._steady = (gap == 1) & (self.nh == 3) & (np.abs(t - self.last_ok) == 1)
-        newly = ~self.lostflag & (gap > p.max_coast)
-        if newly.any():
-            self.lostflag |= newly
-        track = ~self.lostflag
-        prx, pry = pred[:, 0], pred[:, 1]
-        inside = track & (prx >= -0.5) & (prx <= W - 0.5) & (pry >= -0.5) & (pry <= H - 0.5)
-        px = np.rint(prx)
-        py = np.rint(pry)
-        fits = inside & (px - h >= 0) & (py - h >= 0) & (px + h <= W - 1) & (py + h <= H - 1)
-        edge = inside & ~fits
-        # neighbours, from one distance matrix of the predictions
-        j2, d2 = self._neighbours(prx, pry, inside)
+        self._steady = steady
         self._j2 = j2
-        jn = j2[:, 0]
-        dn = d2[:, 0]
-        merged = (dn < rb + rb[np.maximum(jn, 0)] + 1.0) & inside
         self._merged = merged
-        crowded = dn < rb + rb[np.maximum(jn, 0)] + 4.0
-        # fast path: a marker moving predictably, alone, confidently matched last frame
-        # is refined at its prediction and verified, its NCC search skipped this frame
-        F = (fits & (self.nh == 3) & (gap == 1) & (self.sigma < 0.35) & (self.last_score >= 0.9)
-             & ~crowded & (self.stagger != t % p.search_every))
-        r = np.clip(np.ceil(2.0 + 3.0 * self.sigma + (gap - 1)), 2, p.search_radius).astype(np.int64)
-        wide = fits & (self.nh == 1)
-        r[wide] = p.search_radius
+        jn = j2[:, 0]
 
         X = np.full(n, np.nan)
         Y = np.full(n, np.nan)
@@ -1717,8 +2052,11 @@ class _Tracker:
         self._info = info = dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n),
                                  peak=np.full(n, np.nan), valley=np.full(n, np.nan))
         if ridx.size:
-            nb = self._voronoi(XP, YP, prx, pry, jn, inside)
-            X[ridx], Y[ridx], mass[ridx] = self._refine_at(frame, ridx, XP, YP, nb)
+            if _numba is not None:
+                nb = self._refine_all(frame, ridx, XP, YP, jn, X, Y, mass)
+            else:
+                nb = self._voronoi(XP, YP, prx, pry, jn, inside)
+                X[ridx], Y[ridx], mass[ridx] = self._refine_at(frame, ridx, XP, YP, nb)
         for i in (eidx.tolist() if edge.any() else ()):
             XP[i] = YP[i] = np.nan  # no correlation match for edge markers
         if fidx.size:
@@ -1749,7 +2087,18 @@ class _Tracker:
         # status
         midx = np.flatnonzero(fits)
         resid = np.hypot(X - prx, Y - pry)
-        if midx.size:
+        if midx.size and _numba is not None:
+            par = np.array([p.min_score, p.lost_score, p.min_mass_ratio, p.max_mass_ratio, p.max_score_drop,
+                            p.ambiguity_margin, p.jump_px, _BG_RESIDUAL, _BG_RESIDUAL_FADED, _FADED, _WEAK,
+                            _MERGE_VALLEY, _BRIDGE])
+            _rules_kernel(fits, S, SEC, mass, self.mass0, self.mass_ref, self.score_ref, resid, self.sigma, gap,
+                          self.nh, info["foreign"], info["bgres"], info["peak"], self.peak0, XP, YP, prx, pry,
+                          inside, j2, self.rb, info["valley"], lose, par, ST, RS, X, Y, _RULE_CODES)
+            jmp = np.flatnonzero(RS == _R["jump"])
+            chk = np.flatnonzero((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)))
+            if jmp.size or chk.size:
+                self._vouch(jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t)
+        elif midx.size:
             sc = S[midx]
             ms = mass[midx]
             res_ = resid[midx]
@@ -1834,7 +2183,14 @@ class _Tracker:
         soft = np.flatnonzero((ST == FLAGGED) & _IS_SOFT[RS])
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
-        ri = np.flatnonzero(rel)
+        if _numba is not None:
+            upd = np.empty(n, np.bool_)
+            _history_kernel(t, X, Y, S, ST, rel, resid, mass, self.hist_x, self.hist_t, self.nh, self.sigma,
+                            self.last_score, self.last_ok, self.mass_ref, self.score_ref, self.last_upd,
+                            np.array([p.update_score, p.refresh_below, p.update_every], np.float64), upd)
+            ri = np.zeros(0, np.int64)
+        else:
+            ri = np.flatnonzero(rel)
         if ri.size:
             hx, ht = self.hist_x, self.hist_t
             us = ri[self.nh[ri] >= 2]
@@ -1856,12 +2212,13 @@ class _Tracker:
             if us.size:
                 e = resid[us]
                 self.sigma[us] = np.sqrt(0.8 * self.sigma[us] ** 2 + 0.2 * e * e)
-        self.last_score = np.where(okm & np.isfinite(S), S, 0.0)
-        self.last_ok[okm] = t
-        self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
-        self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
-        # template update: confident match whose appearance has changed
-        upd = okm & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
+        if _numba is None:
+            self.last_score = np.where(okm & np.isfinite(S), S, 0.0)
+            self.last_ok[okm] = t
+            self.mass_ref[okm] = 0.9 * self.mass_ref[okm] + 0.1 * mass[okm]
+            self.score_ref[okm] = 0.7 * self.score_ref[okm] + 0.3 * S[okm]
+            # template update: confident match whose appearance has changed
+            upd = okm & (S >= p.update_score) & (S < p.refresh_below) & (np.abs(t - self.last_upd) >= p.update_every)
         if upd.any():
             lam = p.update_rate
             for i in np.flatnonzero(upd).tolist():
@@ -1907,6 +2264,31 @@ class _Tracker:
         # (and whatever the radii, a bright bridge to the neighbour is a merge)
         return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
 
+    def _vouch(self, jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t):
+        """Neighbour checks after the status rules (the compiled path; the numpy path does
+        the same inline): a 'jump' the neighbours made too is none, and a marker resuming
+        after a gap or restarting must have moved like its neighbours."""
+        p = self.p
+        if jmp.size:
+            short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
+            ST[short] = OK
+            bad_j, fine = self._inconsistent(jmp, X, Y, ST, res, t, both=True, min_m=1)
+            ST[short] = FLAGGED
+            lone = np.setdiff1d(jmp, np.concatenate([bad_j, fine]))
+            lone = lone[(resid[lone] < 0.3 * self._spacing[lone]) & (S[lone] >= 0.9)
+                        & (SEC[lone] < S[lone] - p.ambiguity_margin)]
+            fine = np.concatenate([fine, lone]).astype(np.int64)
+            ST[fine] = OK
+            RS[fine] = 0
+            chk = np.union1d(chk, fine[(np.abs(t - self.last_ok[fine]) > 1) | (self.nh[fine] < 3)])
+        if chk.size:
+            bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
+            unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
+            far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.sigma[unk])]
+            bad = np.concatenate([bad, far]).astype(np.int64)
+            ST[bad] = FLAGGED
+            RS[bad] = _R["jump"]
+
     def _rough(self, info, idx, score):
         """Markers whose background is too far from a plane for their contrast.
 
@@ -1923,6 +2305,32 @@ class _Tracker:
     def _rmax(self):
         """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""
         return np.minimum(self.rb + _RD_MARGIN + 3.0, _RD_MAX)
+
+    def _refine_all(self, frame, idx, XP, YP, jn, X, Y, mass):
+        """:meth:`_voronoi` and :meth:`_refine_at` of markers ``idx`` by the compiled
+        kernel; returns the neighbour positions used for the split."""
+        info = self._info
+        n = len(XP)
+        nb = np.full((n, 2), np.nan)
+        foreign = np.zeros(n, np.bool_)
+        _refine_all_kernel(frame, idx, XP, YP, jn, self.rd, self.rb, self.sign64, self.noise, 2, WEIGHT_FRACTION,
+                           FOREIGN_FRACTION, FOREIGN_NOISE, X, Y, mass, foreign, info["bgres"], info["peak"],
+                           info["valley"], nb)
+        info["foreign"] = foreign
+        self._nbr_r = self.rd[np.maximum(jn, 0)] + 0.5
+        # a foreign blob next to a steady marker: split off like a neighbour (rare)
+        cand = idx[foreign[idx] & (mass[idx] > 0)]
+        if cand.size:
+            steady = self._steady[cand] & (np.hypot(XP[cand] - self._pred[cand, 0], YP[cand] - self._pred[cand, 1])
+                                           <= 2.0 + 2.0 * self.sigma[cand])
+            cand = cand[steady]
+            if cand.size:
+                xx, yy, mm, inf = _refine(frame, XP[cand], YP[cand], self.rd[cand], self.sign[cand], self.noise[cand],
+                                          nb[cand], 2, rmax=self.rd[cand], nbr_r=self._nbr_r[cand], explain=np.ones(cand.size, bool))
+                X[cand], Y[cand], mass[cand] = xx, yy, mm
+                for k in ("foreign", "bgres", "peak", "valley"):
+                    info[k][cand] = inf[k]
+        return nb
 
     def _refine_at(self, frame, idx, XP, YP, nb):
         """Refine markers ``idx`` from their pixel-level positions; record diagnostics.
@@ -2052,8 +2460,15 @@ class _Tracker:
     def _set_template(self, i):
         w = self.p.original_weight
         t = w * self.tpl0[i] + (1.0 - w) * self.tplr[i]
-        self.tplu[i] = self._as_match(t)
+        self.tplu[i] = None  # made when needed (:meth:`_tplu`)
         self._stack_template(i, t)
+
+    def _tplu(self, i):
+        """Template of marker ``i`` as matched by OpenCV (uint8 for uint8 frames)."""
+        if self.tplu[i] is None:
+            w = self.p.original_weight
+            self.tplu[i] = self._as_match(w * self.tpl0[i] + (1.0 - w) * self.tplr[i])
+        return self.tplu[i]
 
     def _stack_template(self, i, t):
         s = self.tz.shape[1]
@@ -2077,7 +2492,7 @@ class _Tracker:
             self.tmask[i] = m.ravel()
             w = self.p.original_weight
             t = w * self.tpl0[i] + (1.0 - w) * self.tplr[i]
-            self.tplu[i] = self._as_match(t)
+            self.tplu[i] = None
             self._stack_template(i, t)
         self.tzf = self.tz.reshape(n, -1)
         self.to = o
@@ -2085,9 +2500,10 @@ class _Tracker:
 
     def _match(self, frame, idx, centres, radii):
         """Windowed correlation of markers ``idx`` (:func:`match_windows`; compiled when
-        numba is available, with the unrounded templates)."""
-        if _numba is None:
-            return match_windows(frame, [self.tplu[i] for i in idx], centres, radii)
+        numba is available, with the unrounded templates, for windows of radius <= 6 px:
+        OpenCV's SIMD code is faster on wider ones)."""
+        if _numba is None or np.max(radii) > 6:
+            return match_windows(frame, [self._tplu(i) for i in idx], centres, radii)
         centres = np.asarray(centres, np.int64).reshape(-1, 2)
         radii = np.asarray(radii, np.int64).reshape(-1)
         n = len(centres)
@@ -2104,9 +2520,9 @@ class _Tracker:
     def _score_at(self, frame, idx, cx, cy):
         """TM_CCOEFF_NORMED of each template centred at integer pixels (cx, cy)."""
         if _numba is not None:
-            c = np.column_stack([cx, cy]).astype(np.int64)
-            maps, _, shp = self._match(frame, idx, c, np.zeros(len(idx), np.int64))
-            return np.where(shp[:, 0] > 0, maps[:, 0, 0], 0.0).astype(np.float64)
+            out = np.empty(len(idx))
+            _score_kernel(frame, self.tz, idx, self.h[idx], cx.astype(np.int64), cy.astype(np.int64), out)
+            return out
         I = _gather(frame, cx.astype(np.int64), cy.astype(np.int64), self.to)
         m = self.tmask[idx]
         s1 = np.einsum("ij,ij->i", I, m)
@@ -2118,8 +2534,29 @@ class _Tracker:
         return np.where(var > 1e-6 * (s2 + 1.0), sc, 0.0)
 
     def _search(self, frame, idx, pred, px, py, r, wide, j2, XP, YP, S, SEC):
-        """Windowed NCC around the predictions of markers ``idx``; wide-search consensus."""
+        """Windowed NCC around the predictions of markers ``idx``; wide-search consensus.
+
+        With numba, a marker whose window is small (radius <= 3: moving predictably) is
+        hill-climbed from its prediction instead (a window that small has no room for a
+        runner-up peak away from the best, so nothing is lost); one whose climb reaches
+        the window's edge gets the full search, twice as wide."""
         p = self.p
+        if _numba is not None:
+            small = (r[idx] <= 3) & ~wide[idx]
+            if small.any():
+                cidx = idx[small]
+                out = np.empty((cidx.size, 4))
+                _climb_kernel(frame, self.tz, cidx, self.h[cidx], px[cidx].astype(np.int64),
+                              py[cidx].astype(np.int64), r[cidx], out)
+                rim = out[:, 3] > 0
+                ok = ~rim & (out[:, 2] > -2.0)
+                XP[cidx[ok]], YP[cidx[ok]], S[cidx[ok]], SEC[cidx[ok]] = out[ok, 0], out[ok, 1], out[ok, 2], -2.0
+                idx = np.concatenate([idx[~small], cidx[~ok]])
+                if cidx[~ok].size:
+                    r = r.copy()
+                    r[cidx[~ok]] = np.minimum(2 * r[cidx[~ok]] + 2, p.search_radius)
+                if not idx.size:
+                    return
         ci = np.column_stack([px[idx], py[idx]]).astype(np.int64)
         ri = r[idx]
         maps, origin, shp = self._match(frame, idx, ci, ri)
