@@ -547,9 +547,17 @@ def test_corrections_bad_input_keeps_the_previous_file(tmp_path):
         save_corrections([(0, 1, 2.0, 3.0)], tmp_path / "c.txt")
     with pytest.raises(FileNotFoundError, match="does not exist"):
         load_corrections(tmp_path / "missing.csv")
+    # a correction without a row adds it (one implementation with the review widget) ...
     tracks = pd.DataFrame({"frame": [0], "point": [0], "x": [1.0], "y": [1.0], "status": ["ok"]})
-    with pytest.raises(ValueError, match="correction of point 0 on frame 9 has no row"):
-        apply_corrections(tracks, [(0, 9, 1.0, 1.0)])
+    added = apply_corrections(tracks, [(0, 9, 2.0, 3.0)])
+    assert added.values.tolist() == [[0, 0, 1.0, 1.0, "ok"], [9, 0, 2.0, 3.0, "manual"]]
+    assert added.dtypes.to_dict() == tracks.dtypes.to_dict()
+    # ... but cannot guess the camera among several
+    two = pd.concat([tracks.assign(camera="left"), tracks.assign(camera="right")], ignore_index=True)
+    with pytest.raises(ValueError, match="correction of point 0 on frame 9 has no row in tracks of cameras"):
+        apply_corrections(two, [(0, 9, 1.0, 1.0)])
+    with pytest.raises(ValueError, match=r"tracks lacks columns \['status'\]"):
+        apply_corrections(tracks.drop(columns="status"), [(0, 0, 1.0, 1.0)])
 
 
 def test_corrections_interoperate_with_the_review_widget_log(tmp_path):

@@ -518,6 +518,39 @@ def _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi):
     return a, b, c
 
 
+def _ring_plane(ru, rv, rval, routl, nr):
+    """Plane fitted to the ring pixels not marked in ``routl`` (see :func:`_solve_plane`)."""
+    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
+    for k in range(nr):
+        if routl[k]:
+            continue
+        u = ru[k]
+        v = rv[k]
+        val = rval[k]
+        s0 += 1.0
+        sx += u
+        sy += v
+        sxx += u * u
+        sxy += u * v
+        syy += v * v
+        si += val
+        sxi += u * val
+        syi += v * val
+    return _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
+
+
+def _disk_peak(du, dv, dval, nd, pa, pb, pc):
+    """Largest value above the plane in the disk (0 for an empty disk)."""
+    if nd == 0:
+        return 0.0
+    peak = -np.inf
+    for k in range(nd):
+        res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+        if res > peak:
+            peak = res
+    return peak
+
+
 def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl):
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
@@ -565,63 +598,19 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 rv[nr] = fv
                 rval[nr] = val
                 nr += 1
-    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
     for k in range(nr):
-        u = ru[k]
-        v = rv[k]
-        val = rval[k]
-        s0 += 1.0
-        sx += u
-        sy += v
-        sxx += u * u
-        sxy += u * v
-        syy += v * v
-        si += val
-        sxi += u * val
-        syi += v * val
-    pa, pb, pc = _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
-    peak = 0.0
-    if nd > 0:
-        peak = -np.inf
-        for k in range(nd):
-            res = dval[k] - (pa + pb * du[k] + pc * dv[k])
-            if res > peak:
-                peak = res
+        routl[k] = False
+    pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
+    peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
     thr = max(ff * peak, fn * noise_i)
     nout = 0
-    r0 = r1 = r2s = r3 = r4 = r5 = r6 = r7 = r8 = 0.0
     for k in range(nr):
-        u = ru[k]
-        v = rv[k]
-        val = rval[k]
-        if val - (pa + pb * u + pc * v) > thr:
+        if rval[k] - (pa + pb * ru[k] + pc * rv[k]) > thr:
             routl[k] = True
             nout += 1
-        else:
-            routl[k] = False
     if nout > 0 and nr - nout >= 8:
-        for k in range(nr):
-            if not routl[k]:
-                u = ru[k]
-                v = rv[k]
-                val = rval[k]
-                r0 += 1.0
-                r1 += u
-                r2s += v
-                r3 += u * u
-                r4 += u * v
-                r5 += v * v
-                r6 += val
-                r7 += u * val
-                r8 += v * val
-        pa, pb, pc = _solve_plane(r0, r1, r2s, r3, r4, r5, r6, r7, r8)
-        peak = 0.0
-        if nd > 0:
-            peak = -np.inf
-            for k in range(nd):
-                res = dval[k] - (pa + pb * du[k] + pc * dv[k])
-                if res > peak:
-                    peak = res
+        pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
+        peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
     cut = wfrac * peak if wfrac > 0 else 0.0
     mass = 0.0
     sw = swx = swy = 0.0
@@ -832,32 +821,6 @@ def _ncc_kernel(frame, tz, tid, th, cx, cy, rr, maps, origin, shape):
                     maps[i, a, b] = 0.0
 
 
-def _score_kernel(frame, tz, tid, th, cx, cy, out):
-    """TM_CCOEFF_NORMED of template ``tz[tid[i]]`` centred at pixel (cx, cy) (0 where it
-    does not fit in the image or the window is flat)."""
-    H, W = frame.shape
-    c0 = tz.shape[1] // 2
-    for i in range(cx.shape[0]):
-        h = th[i]
-        x0 = cx[i] - h
-        y0 = cy[i] - h
-        s = 2 * h + 1
-        if x0 < 0 or y0 < 0 or x0 + s > W or y0 + s > H:
-            out[i] = 0.0
-            continue
-        ti = tid[i]
-        t0 = c0 - h
-        s1 = s2 = num = 0.0
-        for p in range(s):
-            for q in range(s):
-                val = np.float64(frame[y0 + p, x0 + q])
-                s1 += val
-                s2 += val * val
-                num += val * tz[ti, t0 + p, t0 + q]
-        var = s2 - s1 * s1 / (s * s)
-        out[i] = num / np.sqrt(var) if var > 1e-6 * (s2 + 1.0) else 0.0
-
-
 def _score1(frame, tz, ti, h, x, y):
     """TM_CCOEFF_NORMED of template ``tz[ti]`` centred at pixel (x, y); -2 off the image."""
     H, W = frame.shape
@@ -877,6 +840,14 @@ def _score1(frame, tz, ti, h, x, y):
             num += val * tz[ti, t0 + p, t0 + q]
     var = s2 - s1 * s1 / (s * s)
     return num / np.sqrt(var) if var > 1e-6 * (s2 + 1.0) else 0.0
+
+
+def _score_kernel(frame, tz, tid, th, cx, cy, out):
+    """TM_CCOEFF_NORMED of template ``tz[tid[i]]`` centred at pixel (cx, cy) (0 where it
+    does not fit in the image or the window is flat)."""
+    for i in range(cx.shape[0]):
+        s = _score1(frame, tz, tid[i], th[i], cx[i], cy[i])
+        out[i] = 0.0 if s == -2.0 else s
 
 
 def _climb_kernel(frame, tz, tid, th, cx, cy, rr, out):
@@ -1211,6 +1182,8 @@ if _numba is not None:  # pragma: no cover - depends on the environment
     _refine_all_kernel = _numba.njit(cache=True, nogil=True)(_refine_all_kernel)
     _nearest_kernel = _numba.njit(cache=True, nogil=True)(_nearest_kernel)
     _solve_plane = _numba.njit(cache=True, nogil=True)(_solve_plane)
+    _ring_plane = _numba.njit(cache=True, nogil=True)(_ring_plane)
+    _disk_peak = _numba.njit(cache=True, nogil=True)(_disk_peak)
     _pass1 = _numba.njit(cache=True, nogil=True)(_pass1)
     _buffers = _numba.njit(cache=True, nogil=True)(_buffers)
     _centroid_kernel = _numba.njit(cache=True, nogil=True)(_centroid_kernel)
@@ -2127,43 +2100,15 @@ class _Tracker:
                     rs[cond] = _R[why]
             ST[midx] = st
             RS[midx] = rs
-            # a marker resuming after a gap (or restarting) must have moved like its
-            # neighbours since it was last reliable
-            # a 'jump' from the motion model that the neighbours made too (the whole wing,
-            # or the rigid target between two stills, stopped or turned at once) is not one
-            jmp = midx[rs == _R["jump"]]
-            if jmp.size:
-                # neighbours: the ok markers and the other jumpers too, if the jump is too
-                # short to have landed on another marker's blob (< 40 % of the spacing)
-                short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
-                ST[short] = OK
-                bad_j, fine = self._inconsistent(jmp, X, Y, ST, res, t, both=True, min_m=1)
-                ST[short] = FLAGGED
-                # a lone marker (nothing to compare with) far from any other: a short jump to
-                # a strong, unambiguous match is its own blob
-                lone = np.setdiff1d(jmp, np.concatenate([bad_j, fine]))
-                lone = lone[(resid[lone] < 0.3 * self._spacing[lone]) & (S[lone] >= 0.9)
-                            & (SEC[lone] < S[lone] - p.ambiguity_margin)]
-                fine = np.concatenate([fine, lone])
-                st[np.isin(midx, fine)] = OK
-                rs[np.isin(midx, fine)] = 0
-                ST[midx], RS[midx] = st, rs
-            resume = np.abs(t - self.last_ok[midx]) > 1
-            chk = midx[(st == OK) & (resume | (self.nh[midx] < 3))]
-            if chk.size:
-                bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
-                # resuming after a gap without neighbours to vouch for it: only close to
-                # its own prediction
-                unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
-                far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.sigma[unk])]
-                bad = np.concatenate([bad, far])
-                ST[bad] = FLAGGED
-                RS[bad] = _R["jump"]
             li = midx[lo]
             X[li], Y[li] = prx[li], pry[li]
             lst = midx[st == LOST]
             X[lst] = np.nan
             Y[lst] = np.nan
+            jmp = np.flatnonzero(RS == _R["jump"])
+            chk = np.flatnonzero((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)))
+            if jmp.size or chk.size:
+                self._vouch(jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t)
         if eidx.size:
             ex, ey = X[eidx], Y[eidx]
             okm = ((mass[eidx] > p.min_mass_ratio * self.mass0[eidx]) & (ex >= -0.5) & (ex <= W - 0.5)
@@ -2265,9 +2210,16 @@ class _Tracker:
         return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
 
     def _vouch(self, jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t):
-        """Neighbour checks after the status rules (the compiled path; the numpy path does
-        the same inline): a 'jump' the neighbours made too is none, and a marker resuming
-        after a gap or restarting must have moved like its neighbours."""
+        """Neighbour checks after the status rules.
+
+        A 'jump' from the motion model that the neighbours made too (the whole wing, or
+        the rigid target between two stills, stopped or turned at once) is none: the
+        neighbours are the ok markers, and the other jumpers too when the jump is too
+        short to have landed on another marker's blob (< 40 % of the spacing); a lone
+        marker (nothing to compare with) is vouched for by a short jump (< 30 % of the
+        spacing) to a strong, unambiguous match. Then a marker resuming after a gap, or
+        restarting, must have moved like its neighbours since it was last ok (without
+        neighbours to vouch for it: only close to its own prediction)."""
         p = self.p
         if jmp.size:
             short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
@@ -2369,6 +2321,29 @@ class _Tracker:
         self._nbr_r = self.rd[j] + 0.5
         return np.column_stack([nx, ny])
 
+    def _neighbours_then(self, i, ti, Pi, okn, res):
+        """Up to six neighbours of marker ``i``, nearest first: ok now (``okn``) and on frame
+        ``ti``, within ``self.local`` px of its position ``Pi`` then, and - when two or
+        more did - those that moved like it then (not the static mount and reference dots
+        for a wing marker). Returns their indices and positions on frame ``ti``."""
+        T = res.x.shape[0]
+        cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
+        prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
+        d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
+        keep = d <= self.local
+        cand, prev, d = cand[keep], prev[keep], d[keep]
+        t1 = int(self.hist_t[i, 1])
+        if cand.size >= 2 and self.nh[i] >= 2 and t1 != ti:
+            vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
+            tb = ti - (1 if t1 < ti else -1)
+            if 0 <= tb < T:
+                vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
+                same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
+                if same.sum() >= 2:
+                    cand, prev, d = cand[same], prev[same], d[same]
+        o = np.argsort(d)[:6]
+        return cand[o], prev[o]
+
     def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0, min_m=2):
         """Markers ``chk`` whose displacement since their last ok frame disagrees
         with that of their neighbours (those that moved like them then).
@@ -2393,27 +2368,9 @@ class _Tracker:
                 if not 0 <= ti < T or ti == t:
                     continue
                 Pi = self.hist_x[i, 0]
-            cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
+            cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
             if cand.size < min_m:
                 continue
-            prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
-            d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
-            keep = d <= self.local
-            cand, prev, d = cand[keep], prev[keep], d[keep]
-            if cand.size < min_m:
-                continue
-            # neighbours that moved like this marker when it was last seen
-            t1 = int(self.hist_t[i, 1])
-            if self.nh[i] >= 2 and t1 != ti and 0 <= 2 * ti - t1 < T:
-                vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
-                tb = ti - (1 if t1 < ti else -1)
-                if 0 <= tb < T:
-                    vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
-                    same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
-                    if same.sum() >= 2:
-                        cand, prev, d = cand[same], prev[same], d[same]
-            o = np.argsort(d)[:6]
-            cand, prev = cand[o], prev[o]
             pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m)
             if pq is None:
                 continue  # the neighbours do not move together: nothing to compare with
@@ -2685,23 +2642,7 @@ class _Tracker:
         Pi = self.hist_x[i, 0]
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
-            c1 = cand[res.status[ti, cand] == OK]
-            prev = np.column_stack([res.x[ti, c1], res.y[ti, c1]])
-            d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
-            keep = d <= self.local
-            c1, prev, d = c1[keep], prev[keep], d[keep]
-            # neighbours that moved like this marker when it was last seen
-            t1 = int(self.hist_t[i, 1])
-            if c1.size >= 2 and self.nh[i] >= 2 and t1 != ti:
-                vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
-                tb = ti - (1 if t1 < ti else -1)
-                if 0 <= tb < T:
-                    vj = prev - np.column_stack([res.x[tb, c1], res.y[tb, c1]])
-                    same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
-                    if same.sum() >= 2:
-                        c1, prev, d = c1[same], prev[same], d[same]
-            o = np.argsort(d)[:6]
-            c1, prev = c1[o], prev[o]
+            c1, prev = self._neighbours_then(i, ti, Pi, okn, res)
             if c1.size >= 2:
                 pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
@@ -3469,78 +3410,143 @@ def load_corrections(path):
     -------
     pandas.DataFrame
         Columns point (int64), frame (int64), x, y (float64, NaN marks a point the user
-        declared lost), plus any extra columns saved.
+        declared lost), plus any extra columns saved (the review widget's ``camera``).
+
+    Raises
+    ------
+    FileNotFoundError
+        When ``path`` does not exist.
+    ValueError
+        When the suffix is not .csv/.json, the JSON is not a wingphoto corrections file,
+        or columns are missing.
     """
     import pandas as pd
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"corrections file {path} does not exist")
-    if path.suffix.lower() == ".csv":
-        c = pd.read_csv(path)
-    elif path.suffix.lower() == ".json":
-        data = json.loads(path.read_text())
-        recs = data["corrections"] if isinstance(data, dict) else data
-        c = pd.DataFrame(recs, columns=None if recs else CORRECTION_COLUMNS)
-    else:
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".json"):
         raise ValueError(f"corrections path must end in .csv or .json, got {path.name!r}")
+    if not path.is_file():
+        raise FileNotFoundError(f"corrections file {path} not found: it does not exist (check the path)")
+    if suffix == ".csv":
+        c = pd.read_csv(path, dtype={"camera": str})
+    else:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"corrections file {path} is not valid JSON: {exc}") from None
+        if not (isinstance(data, dict) and data.get("format") == "wingphoto-corrections"
+                and isinstance(data.get("corrections"), list)):
+            raise ValueError(f"corrections file {path} is not a wingphoto corrections file "
+                             "(a JSON object with format 'wingphoto-corrections' and a corrections list)")
+        recs = data["corrections"]
+        if not all(isinstance(r, dict) for r in recs):
+            raise ValueError(f"corrections file {path} is malformed: each correction must be an object")
+        c = pd.DataFrame(recs, columns=None if recs else CORRECTION_COLUMNS)
+    missing = [k for k in CORRECTION_COLUMNS if k not in c.columns]
+    if missing:
+        raise ValueError(f"corrections file {path} lacks columns {missing}; each correction is (point, frame, x, y)")
     return _as_corrections(c)
 
 
 def apply_corrections(tracks, corrections):
-    """Replay a corrections log onto tracks.
+    """Replay a corrections log onto tracks (the one implementation: the review widget's
+    :class:`~wingphoto.widgets.state.ReviewState` applies its log with it too).
 
     Parameters
     ----------
     tracks : pandas.DataFrame
-        Tracks (columns frame, point, x, y, status; ``camera`` optional).
+        Tracks (columns frame, point, x, y, status; ``camera``, ``score``, ``reason``,
+        ``x_pix``, ``y_pix`` optional); not modified.
     corrections : DataFrame or list
-        Log of (point, frame, x, y), applied in order. A correction with NaN x, y declares
-        the point lost on that frame. With a ``camera`` column, a correction applies only
-        to the rows of that camera.
+        Log of (point, frame, x, y) - DataFrame rows, dicts, tuples, or the review
+        widget's ``Correction(camera, point, frame, x, y)`` - applied in order, so a later
+        correction of the same point and frame wins. A correction with NaN x, y declares
+        the point lost on that frame. With a ``camera`` column a correction applies to the
+        rows of that camera only; without one, to that point and frame in every camera.
 
     Returns
     -------
     pandas.DataFrame
-        A copy with corrected rows: x, y replaced, status ``manual`` (``lost`` for NaN),
-        reason ``""`` (``"manual"`` for NaN), ``x_pix, y_pix`` the rounded position.
+        A copy whose corrected rows have x, y replaced and status ``manual`` (``lost`` for
+        NaN), score NaN (a hand-placed position has no correlation score), reason ``""``
+        (``"manual"`` when declared lost), and ``x_pix, y_pix`` the rounded position -
+        each column only where ``tracks`` has it. A correction for a point and frame
+        without a row adds the row (a point the tracker was not given, a frame beyond the
+        tracked ones); the result is then sorted by camera, frame and point. Column
+        dtypes are kept.
 
     Raises
     ------
     ValueError
-        A correction names a (frame, point) with no row in ``tracks``.
+        Missing columns in ``tracks`` or in the corrections, or a correction without a
+        camera for a row to add to tracks of several cameras.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> t = pd.DataFrame({"frame": [0, 1], "point": 0, "x": [5.0, 6.0], "y": 5.0,
+    ...                   "score": 0.9, "status": ["ok", "flagged"]})
+    >>> row = apply_corrections(t, [(0, 1, 6.5, 5.25)]).iloc[1]
+    >>> float(row.x), float(row.y), row.status, bool(np.isnan(row.score))
+    (6.5, 5.25, 'manual', True)
     """
+    import pandas as pd
+
+    missing = [k for k in ("frame", "point", "x", "y", "status") if k not in tracks.columns]
+    if missing:
+        raise ValueError(f"tracks lacks columns {missing}; expected a tracks DataFrame (frame, point, x, y, status)")
     c = _as_corrections(corrections)
-    t = tracks.copy()
-    if "reason" not in t.columns:
-        t["reason"] = ""
-    key = t["frame"].to_numpy(np.int64) * (1 << 32) + t["point"].to_numpy(np.int64)
-    cams = t["camera"].astype(str).to_numpy() if "camera" in t.columns else None
-    pos = {}
-    for i, (k, cam) in enumerate(zip(key, cams if cams is not None else [None] * len(key))):
-        pos.setdefault(k, []).append((i, cam))
-    cols = {name: t.columns.get_loc(name) for name in t.columns}
-    for r in c.itertuples(index=False):
-        k = int(r.frame) * (1 << 32) + int(r.point)
-        rows = pos.get(k, [])
-        cam = getattr(r, "camera", None)
-        if cam is not None and cams is not None:
-            rows = [(i, c_) for i, c_ in rows if c_ == cam]
-        if not rows:
-            raise ValueError(
-                f"correction of point {r.point} on frame {r.frame} has no row in tracks; "
-                "check the point/frame numbers (and camera)"
-            )
-        lost = not (np.isfinite(r.x) and np.isfinite(r.y))
-        for i, _ in rows:
-            t.iat[i, cols["x"]] = np.nan if lost else r.x
-            t.iat[i, cols["y"]] = np.nan if lost else r.y
-            t.iat[i, cols["status"]] = "lost" if lost else "manual"
-            t.iat[i, cols["reason"]] = "manual" if lost else ""
-            if "x_pix" in cols:
-                t.iat[i, cols["x_pix"]] = np.nan if lost else float(np.rint(r.x))
-                t.iat[i, cols["y_pix"]] = np.nan if lost else float(np.rint(r.y))
-    return t
+    out = tracks.copy()
+    if len(c) == 0:
+        return out
+    by_cam = "camera" in out.columns and "camera" in c.columns
+    key = ["camera", "frame", "point"] if by_cam else ["frame", "point"]
+    c = c.drop_duplicates(subset=key, keep="last").reset_index(drop=True)
+    rows = out[key].astype({"frame": np.int64, "point": np.int64}).reset_index().merge(c[key].reset_index(),
+                                                                                       on=key, suffixes=("", "_c"))
+    lost = ~(np.isfinite(c["x"].to_numpy()) & np.isfinite(c["y"].to_numpy()))
+
+    def fill(frame, at, ci):
+        x = np.where(lost[ci], np.nan, c["x"].to_numpy()[ci])
+        y = np.where(lost[ci], np.nan, c["y"].to_numpy()[ci])
+        frame.loc[at, "x"] = x
+        frame.loc[at, "y"] = y
+        frame.loc[at, "status"] = np.where(lost[ci], "lost", "manual")
+        if "score" in frame.columns:
+            frame.loc[at, "score"] = np.nan
+        if "reason" in frame.columns:
+            frame.loc[at, "reason"] = np.where(lost[ci], "manual", "")
+        for pix, v in (("x_pix", x), ("y_pix", y)):
+            if pix in frame.columns:
+                frame.loc[at, pix] = np.rint(v)
+
+    fill(out, rows["index"].to_numpy(), rows["index_c"].to_numpy())
+    absent = np.setdiff1d(np.arange(len(c)), rows["index_c"].to_numpy())
+    if absent.size:
+        extra = pd.DataFrame({k: c[k].to_numpy()[absent] for k in key})
+        if "camera" in out.columns and "camera" not in extra.columns:
+            cams = out["camera"].astype(str).unique()
+            if len(cams) != 1:
+                p0, f0 = int(c["point"].iloc[absent[0]]), int(c["frame"].iloc[absent[0]])
+                raise ValueError(
+                    f"correction of point {p0} on frame {f0} has no row in tracks of cameras {sorted(cams)}: "
+                    "give its camera (a camera column in the corrections) to add the row"
+                )
+            extra.insert(0, "camera", cams[0])
+        for col in out.columns:
+            if col not in extra.columns:
+                numeric = pd.api.types.is_numeric_dtype(out[col].dtype)
+                extra[col] = np.full(absent.size, np.nan) if numeric else np.full(absent.size, "", dtype=object)
+        extra = extra[list(out.columns)]
+        fill(extra, np.arange(absent.size), absent)
+        dtypes = out.dtypes.to_dict()
+        extra = extra.astype({k: v for k, v in dtypes.items() if not (pd.api.types.is_integer_dtype(v)
+                                                                      and extra[k].isna().any())})
+        out = pd.concat([out, extra], ignore_index=True)
+        order = [k for k in ("camera", "frame", "point") if k in out.columns]
+        out = out.sort_values(order, kind="stable").reset_index(drop=True)
+    return out
 
 
 def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, conflict_px=3.0,

@@ -677,12 +677,17 @@ def _as_correction(c):
     c = Correction(*c)
     if not isinstance(c.camera, str) or not c.camera:
         raise ValueError(f"correction camera must be a camera name, got {c.camera!r}")
+    try:
+        lost = math.isnan(float(c.x)) and math.isnan(float(c.y))
+    except (TypeError, ValueError):
+        lost = False
     return Correction(
         c.camera,
         _point_number(c.point, "correction point"),
         _point_number(c.frame, "correction frame"),
-        _finite(c.x, "correction x"),
-        _finite(c.y, "correction y"),
+        # NaN, NaN declares the point lost (as a log saved by wingphoto.track may hold)
+        math.nan if lost else _finite(c.x, "correction x"),
+        math.nan if lost else _finite(c.y, "correction y"),
     )
 
 
@@ -698,54 +703,32 @@ def _check_tracks(tracks, name="tracks"):
 def apply_corrections(tracks, corrections):
     """Return ``tracks`` with each correction's position and status ``'manual'``.
 
+    The one implementation, :func:`wingphoto.track.apply_corrections`, after checking
+    that ``tracks`` has a camera column: a later correction of the same (camera, point,
+    frame) wins, corrected rows get score NaN (no correlation score for a hand-placed
+    position), reason ``""`` and, when present, the tracker's ``x_pix``, ``y_pix`` = the
+    rounded position; a correction for a row absent from ``tracks`` adds the row (then
+    sorted by camera, frame, point).
+
     Parameters
     ----------
     tracks : pandas.DataFrame
         Tracks (camera, frame, point, x, y, score, status); not modified.
     corrections : iterable of Correction or (camera, point, frame, x, y)
-        Applied in order, so a later correction of the same (camera, point, frame) wins.
-        A correction for a row absent from ``tracks`` adds the row.
 
     Returns
     -------
     tracks : pandas.DataFrame
-        A copy; corrected rows get x, y, status ``'manual'``, score NaN (no
-        correlation score for a hand-placed position) and, when present, the tracker's
-        ``x_pix``, ``y_pix`` = the rounded position; sorted by camera, frame, point when
-        rows were added.
     """
     _check_tracks(tracks)
     corrections = [_as_correction(c) for c in corrections]
-    out = tracks.copy()
-    if not corrections:
-        return out
-    last = {}
-    for c in corrections:
-        last[(c.camera, c.point, c.frame)] = c
-    fix = pd.DataFrame(list(last.values()), columns=list(Correction._fields))
-    fix = fix.astype({"point": np.int64, "frame": np.int64, "x": np.float64, "y": np.float64})
-    key = ["camera", "frame", "point"]
-    idx = pd.MultiIndex.from_frame(out[key].astype({"frame": np.int64, "point": np.int64}))
-    fidx = pd.MultiIndex.from_frame(fix[key])
-    pos = idx.get_indexer(fidx)
-    present = pos >= 0
-    rows = out.index[pos[present]]
-    out.loc[rows, "x"] = fix.loc[present, "x"].to_numpy()
-    out.loc[rows, "y"] = fix.loc[present, "y"].to_numpy()
-    out.loc[rows, "status"] = "manual"
-    if "score" in out.columns:
-        out.loc[rows, "score"] = np.nan
-    for pix, col in (("x_pix", "x"), ("y_pix", "y")):  # the tracker's integer pixel, kept consistent
-        if pix in out.columns:
-            out.loc[rows, pix] = np.round(fix.loc[present, col].to_numpy())
-    if (~present).any():
-        extra = fix.loc[~present, ["camera", "frame", "point", "x", "y"]].copy()
-        extra["status"] = "manual"
-        if "score" in out.columns:
-            extra["score"] = np.nan
-        out = pd.concat([out, extra.astype(out.dtypes[extra.columns].to_dict())], ignore_index=True)
-        out = out.sort_values(key, kind="stable").reset_index(drop=True)
-    return out
+    return _track_corrections().apply_corrections(tracks, corrections)
+
+
+def _track_corrections():
+    from .. import track
+
+    return track
 
 
 def _merge_camera_tracks(tracks, camera, new):
@@ -800,28 +783,25 @@ def replay_corrections(tracks, corrections, *, retrack=None, frames=None):
 def write_corrections(corrections, path):
     """Save a corrections log atomically as CSV (``.csv``) or JSON (``.json``).
 
-    CSV columns: camera, point, frame, x, y. JSON: ``{"format": "wingphoto-corrections",
-    "version": 1, "corrections": [{camera, point, frame, x, y}, ...]}``. Order is kept:
-    it is the replay order.
+    The format of :func:`wingphoto.track.save_corrections` (which writes it). CSV columns:
+    camera, point, frame, x, y. JSON: ``{"format": "wingphoto-corrections", "version": 1,
+    "corrections": [{camera, point, frame, x, y}, ...]}``. Order is kept: it is the
+    replay order.
     """
-    path = Path(path)
     corrections = [_as_correction(c) for c in corrections]
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
-        df = pd.DataFrame(corrections, columns=list(Correction._fields))
-        with atomic_write(path, "w", encoding="utf-8", newline="") as f:
-            df.to_csv(f, index=False, float_format="%.17g")
-    elif suffix == ".json":
-        data = {"format": CORRECTIONS_FORMAT, "version": 1, "corrections": [c._asdict() for c in corrections]}
-        with atomic_write(path, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1)
+    if not corrections:
+        frame = pd.DataFrame({k: pd.Series(dtype=d) for k, d in
+                              zip(Correction._fields, (str, np.int64, np.int64, np.float64, np.float64))})
     else:
-        raise ValueError(f"corrections path {path} must end in .csv or .json")
-    return path
+        frame = pd.DataFrame(corrections, columns=list(Correction._fields))
+    return _track_corrections().save_corrections(frame, path)
 
 
 def read_corrections(path):
     """Read a corrections log written by :func:`write_corrections` (CSV or JSON).
+
+    Read by :func:`wingphoto.track.load_corrections`; the log must name the camera of
+    each correction.
 
     Returns
     -------
@@ -834,29 +814,10 @@ def read_corrections(path):
     ValueError
         When the suffix is not .csv/.json or the content is malformed.
     """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".json"):
-        raise ValueError(f"corrections path {path} must end in .csv or .json")
-    if not path.is_file():
-        raise FileNotFoundError(f"corrections file {path} not found")
-    if suffix == ".csv":
-        df = pd.read_csv(path, dtype={"camera": str})
-        missing = [c for c in Correction._fields if c not in df.columns]
-        if missing:
-            raise ValueError(f"corrections file {path} lacks columns {missing}")
-        rows = df[list(Correction._fields)].itertuples(index=False, name=None)
-    else:
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"corrections file {path} is not valid JSON: {exc}") from None
-        if not isinstance(data, dict) or data.get("format") != CORRECTIONS_FORMAT:
-            raise ValueError(f"corrections file {path} is not a wingphoto corrections file")
-        try:
-            rows = [tuple(c[k] for k in Correction._fields) for c in data["corrections"]]
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"corrections file {path} is malformed: {exc!r}") from None
+    c = _track_corrections().load_corrections(path)
+    if "camera" not in c.columns:
+        raise ValueError(f"corrections file {path} lacks columns ['camera']: the review needs each correction's camera")
+    rows = c[list(Correction._fields)].itertuples(index=False, name=None)
     return tuple(_as_correction(r) for r in rows)
 
 
