@@ -27,21 +27,30 @@ Design, and the failure each choice prevents
    gain/offset invariant, which survives slow glare.
 3. **Sub-pixel refinement inside the loop** (the *fast sub-pixel refiner*,
    :func:`refine_centroids`): background-subtracted intensity centroid on the raw
-   frame inside a disk of radius ``blob radius + 1.5 px`` centred on the pixel-level
-   match, the background a *plane* fitted to a 2 px ring just outside it, re-centred on
-   the nearest pixel and repeated where that pixel changed. The next prediction uses the
-   refined point. Prevents: the thesis' two-pass design in which NCC's integer positions
-   drifted off-centre and ``cntrd`` was fed stale seeds. A centroid over the *whole*
-   anti-aliased blob is unbiased (no pixel locking) as long as the disk contains the
-   blob: the residual bias is an edge term of order 0.1 / (blob area) px, measured
-   below 0.005 px on supersampled discs; Gaussian fits and parabolic peak interpolation
-   are biased on flat-topped painted dots. The plane (not a constant) matters under
-   glare: a gradient of 5 grey levels/px across an 8 px marker biases a constant-
-   background centroid by ~0.3 px up the gradient.
+   frame inside a disk of radius ``blob radius + 3 px`` centred on the pixel-level
+   match, the background a *plane* fitted to a 2 px ring just outside it (refitted
+   without the ring pixels that stand far above it), each pixel weighted by its value
+   minus a fifth of the blob's peak, re-centred on the nearest pixel and repeated where
+   that pixel changed. The next prediction uses the refined point. Prevents: the
+   thesis' two-pass design in which NCC's integer positions drifted off-centre and
+   ``cntrd`` was fed stale seeds. The disk must contain the whole blob - its long axis
+   and the blur, not the area-equivalent radius: a disk 1.5 px beyond that radius
+   pulled the centre of a blob that had grown since frame 0 (foreshortening) up to a
+   pixel towards the disk's centre, and on the rigid target 0.4-0.8 px. Weighting by
+   the value above a fifth of the peak leaves out what the disk holds besides the blob
+   (a membrane edge, glare, the tail of another blob), at the price of a slight pixel
+   locking on hard-edged blobs (< 0.03 px unblurred, < 0.01 px with the optics' blur).
+   The disk is fixed after frame 0 (grown there if the blob spills out of it): a disk
+   that grows in the middle of a sequence swallows a neighbour sooner than it catches a
+   growing blob. The plane (not a constant) matters under glare: a gradient of 5 grey
+   levels/px across an 8 px marker biases a constant-background centroid by ~0.3 px up
+   the gradient.
 4. **Pixels are split between close neighbours (Voronoi)** before the centroid: each
-   marker only uses pixels nearer to itself than to its nearest neighbour. Prevents: a
-   neighbour 10 px away pulling the centroid (the thesis' ``cntrd`` window of 9 px
-   straddled two markers on a foreshortened wing).
+   marker only uses pixels nearer to itself than to its nearest neighbour *matched on
+   this frame* (one that lost its match to another marker may be anywhere near its
+   prediction: a split there would cut this marker's own blob). Prevents: a neighbour 10
+   px away pulling the centroid (the thesis' ``cntrd`` window of 9 px straddled two
+   markers on a foreshortened wing).
 5. **Template update that cannot drift.** A marker's template is re-cut with
    ``cv2.getRectSubPix`` *centred on the refined sub-pixel position*, only when the match
    is confident (score >= ``update_score``) but the appearance has changed (score <
@@ -55,48 +64,85 @@ Design, and the failure each choice prevents
    per frame; when two markers land on one blob the one closer to its own prediction
    keeps it and the other is flagged ``conflict`` (reported at its prediction).
    Prevents: two tracks silently merging into one after a close pass.
-7. **Ambiguous, low-score, merged and out-of-frame points are flagged or lost, never ok.**
+7. **Ambiguous, low-score, merged, pulled and out-of-frame points are flagged or lost,
+   never ok.**
    ``ambiguous``: a second local maximum of the correlation, not explained by another
    marker's predicted position, within ``ambiguity_margin`` of the best. ``low_score``:
-   score < ``min_score`` (flagged) or < ``lost_score`` (lost). ``merged``: two predicted
-   markers closer than the sum of their radii + 1 px (their blobs touch; the wing is
-   edge-on): both flagged. ``jump``: refined point further from the prediction than the
-   motion model allows. ``no_signal``: the blob's integrated brightness fell below
-   ``min_mass_ratio`` of its frame-0 value. ``edge``: the template no longer fits in the
-   image (centroid only, flagged). ``out_of_frame``: the prediction left the image (lost).
-   Flagged and lost points do not feed the motion model (it coasts on the last reliable
-   points). Prevents: the thesis' confident wrong positions in glare and when markers ran
-   together at extreme angles.
+   score < ``min_score`` (flagged) or < ``lost_score`` (lost). ``merged``: the blob
+   touches another marker's - the two are closer than the sum of their radii + 1 px
+   and no dark gap (< half the peak) separates them, or a bright bridge (> 0.8 of the
+   peak) joins them (the wing is edge-on). ``foreign``: something bright that no known
+   marker explains stands in the background ring and touches the disk - a marker
+   without a pick or a lost one appearing next to this one, glare: the centroid may be
+   pulled (a foreign blob whose centre can be found next to a marker tracked steadily
+   is split off like a known neighbour when a dark gap separates the two, and the point
+   stays ok). ``background``: the ring departs from a plane by more than 10 % of the
+   marker's contrast (4 % for a marker that faded below 60 % of its frame-0 peak or
+   correlates below 0.75: turning edge-on, it is a faint smear that a membrane edge or
+   glare shifts by up to a pixel). ``jump``: refined point further from the prediction
+   than the motion model allows (unless the neighbours vouch for it, see 10), or a
+   marker that resumes after a gap and did not move like its neighbours. ``no_signal``:
+   the blob's integrated brightness fell below ``min_mass_ratio`` of its frame-0 value.
+   ``edge``: the template no longer fits in the image (centroid only, flagged).
+   ``out_of_frame``: the prediction left the image (lost). Flagged and lost points do
+   not feed the motion model (it coasts on the last reliable points), except an
+   ``edge`` point and one flagged ``merged``, ``foreign`` or ``background`` whose move
+   since its last reliable position the neighbours confirm. Prevents: the thesis'
+   confident wrong positions in glare and when markers ran together at extreme angles,
+   and (on hard synthetic sequences started at other stroke phases) ok points up to 2.8
+   px off, pulled by a marker without a pick appearing next to them.
 8. **Re-acquisition from the neighbours.** A marker lost for more than ``max_coast``
-   frames (left the frame, merged, glare) is searched for again where a robust affine
-   map, fitted on its six nearest reliable neighbours from the reference frame (the
-   picks) to now, puts it: a planar wing seen from afar moves by an affine map however
-   much time has passed. Neighbours are those that had moved like the marker when it was
-   last seen, and moving ones for a marker that was moving (static ones - the mount, the
-   reference dots - for a static marker). The prediction is used
-   only when the neighbours agree with the map (>= 4 inliers, RMS <= 1.5 px, shrinking
-   the set from six to four nearest if needed); the blob found is accepted only with a high,
-   unambiguous score, if this marker's prediction is the nearest to it, and if no
-   flagged or lost marker (which could own it) is nearby; the marker is flagged
-   ``reacquired`` on that frame. Prevents: tip markers that left the frame being lost
-   for the rest of the sequence (the thesis' lost tip markers) without ever taking a
-   neighbour's blob.
+   frames (left the frame, merged, glare) is searched for again where its neighbours
+   put it: those reliable on its last reliable frame and now - and, when two or more
+   did, those that moved like it then (moving ones for a wing marker, not the static
+   mount and reference dots) - map its last position to now by a robust affine map (four
+   or more that agree with one, RMS <= 1.5 px), else by the mean displacement of a group
+   that moved alike; failing that, a robust affine map from the reference frame (the
+   picks): a planar wing seen from afar moves by an affine map however much time has
+   passed. An isolated marker (fewer than two neighbours within four neighbour spacings:
+   the two-marker rigid target, a reference dot) is searched for in a wide window
+   (``search_radius``) at its last position, moved like its one neighbour, and accepted
+   only with a score of at least 0.9. The blob found is accepted only with a high,
+   unambiguous score, if this marker's prediction is the nearest to it, if no flagged or
+   lost marker (which could own it) is nearby - unless that one is itself re-acquired on
+   another blob and the two assignments fit the two predictions better than the swap,
+   so that two lost neighbours do not block each other for ever - if its refinement
+   finds no foreign blob, and if the neighbours put the marker's last *ok* position
+   within 4 px of it; the marker is flagged ``reacquired`` on that frame. Prevents: tip
+   markers that left the frame being lost for the rest of the sequence (the thesis'
+   lost tip markers), marker 0 of the rigid target lost from its 67th still to the end,
+   without ever taking a neighbour's blob.
 9. **First frames (and restarts).** Without a velocity, frame 1 is searched within
-   ``search_radius``; each such match is checked against the local affine motion of its
-   neighbours (as in 8), and an ambiguous match or one more than 3 px from that
-   prediction is replaced by a small search at the prediction. Prevents: a marker
-   starting on its neighbour when the wing moves fast at frame 0.
-10. **Optional backward pass** (``bidirectional=True``): tracking again from the last
+   ``search_radius``; each such match is checked against the motion of its neighbours
+   (up to six within four neighbour spacings: the other markers with a motion model and
+   the wide-searched ones whose match is unambiguous, their displacement from the
+   reference frame mapped as in 8). An ambiguous match is replaced by a small search at
+   the neighbours' prediction; an unambiguous one that disagrees with it is flagged
+   ``ambiguous`` (not moved: a static dot next to the wing keeps its own match). Without
+   a group of neighbours that moved alike the match stands. Prevents: a marker starting
+   on its neighbour's, or an unpicked marker's, blob when the wing moves fast at frame 0.
+10. **Neighbours vouch for a jump, and check a resumption.** A marker that leaves its
+    prediction by more than the motion model allows is not flagged ``jump`` when its
+    neighbours made the same move (the whole wing, or the rigid target between two
+    stills, stopped or turned at once); a marker with nothing to compare with is vouched
+    for by a short move (< 30 % of the spacing to its nearest marker) to a strong,
+    unambiguous match. Conversely a marker that resumes after a gap (flagged or lost on
+    the previous frames) or restarts is ok only if its move since its last ok position
+    agrees with its neighbours' (or, without neighbours to compare with, if it is within
+    2 px of its own prediction). Prevents: a dead stop losing every marker of a rigid
+    target, and a marker that coasted landing on a neighbour's blob that happens to lie
+    near its extrapolated prediction.
+11. **Optional backward pass** (``bidirectional=True``): tracking again from the last
     frame to the first; where both passes are ok but disagree by more than
     ``fb_tolerance`` the point is flagged ``fb_disagree``; where only the backward pass
     is ok (forward lost it), its position is used.
-11. **Streaming, checkpoints.** Frames are read one at a time (memory independent of the
+12. **Streaming, checkpoints.** Frames are read one at a time (memory independent of the
     sequence length); results go to preallocated arrays and the DataFrame is built at the
     end. With ``checkpoint=path`` the complete state is saved atomically every
     ``checkpoint_every`` frames and when an exception stops the run; the same call
     resumes from it with bit-identical results.
 
-12. **Fast path.** A marker moving predictably (three reliable points, prediction
+13. **Fast path.** A marker moving predictably (three reliable points, prediction
     residual RMS < 0.35 px), alone (no neighbour within its radius + the neighbour's + 4
     px) and matched with score >= 0.9 on the previous frame gets the full NCC search only
     every ``search_every`` frames (staggered across markers). In between, the centroid
@@ -106,15 +152,27 @@ Design, and the failure each choice prevents
     any failure runs the full search on that frame. Prevents: spending most of the time
     on ``matchTemplate`` calls that only confirm the prediction (``search_every=1``
     searches everything, every frame).
-13. **Points without a pick.** A NaN pick (a marker invisible in frame 0) gives that
+14. **Points without a pick.** A NaN pick (a marker invisible in frame 0) gives that
     point lost rows (reason ``no_pick``) instead of failing the whole run. Such a marker
-    is not known to the tracker, so its blob cannot be kept apart from its neighbours'
-    when it appears later (a known limitation).
+    is not known to the tracker: when it appears next to a tracked one, the ``foreign``
+    test of 7 keeps it from pulling that one.
+15. **Compiled kernels (optional).** With numba installed, the per-frame work runs as
+    compiled loops over the markers: the centroid passes, the windowed and single-pixel
+    correlation (a small search window - radius <= 3 px, a marker moving predictably -
+    is hill-climbed from the prediction: such a window has no room for a runner-up peak
+    away from the best, so nothing is lost), the peak analysis, the nearest neighbours,
+    the start of a step (predictions, fast path), its status rules and the motion-model
+    update. The numpy/OpenCV code computes the same (``WINGPHOTO_NO_NUMBA=1`` before
+    the import forces it; OpenCV correlates the template rounded to 8 bits). Compiling
+    costs ~6 s on the first call for 8-bit frames (~3 s more per other pixel type),
+    cached on disk next to the module for later processes. Prevents: the ~300 small
+    numpy calls per frame that held the numpy code at ~700 frames/s.
 
-Speed: one ``matchTemplate`` per searched marker on a window of a few pixels, everything
-else vectorised across markers (no pandas in the loop): about 1200 frames/s for 30
-markers on 512 x 512 frames on a loaded 2-core machine, below the 3000 frames/s target.
-See ``benchmarks/track_bench.py``.
+Speed (``benchmarks/track_bench.py``, 30 markers on 512 x 512 frames, a 2-core machine
+shared with other work): ~3200 frames/s over 300 frames and ~3700 over 1000 with numba
+(the start - picks and the wide search of frame 1 - costs ~15 ms once), ~700 frames/s
+with the numpy/OpenCV code only. ``benchmarks/track_bench.py --sweep`` tracks hard
+sequences at ten stroke phases and checks that no ok point is more than 1 px off.
 """
 from __future__ import annotations
 
@@ -484,9 +542,12 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
 
 
 # --------------------------------------------------------------------------- accelerator
-# Optional: with numba installed, the centroid pass and the windowed correlation run as
-# compiled loops over the markers (the same arithmetic as the numpy code above and
-# cv2.matchTemplate); without it, or with WINGPHOTO_NO_NUMBA=1, the numpy/OpenCV code runs.
+# Optional (design choice 15 in the module docstring): with numba installed, the per-frame
+# work runs as compiled loops over the markers - the centroid passes, the windowed and
+# single-pixel correlation, the peak analysis, the nearest neighbours, the start of a step
+# (predictions, fast path), its status rules and the motion-model update - with the same
+# arithmetic as the numpy/OpenCV code, which runs without numba or with
+# WINGPHOTO_NO_NUMBA=1 set before the import.
 try:  # pragma: no cover - depends on the environment
     import os as _os
 
@@ -682,26 +743,6 @@ def _buffers(rd):
         cap = max(cap, m * m)
     return (np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap),
             np.empty(cap, np.bool_))
-
-
-def _centroid_kernel(frame, ix, iy, rd, sign, nbx, nby, noise, nbr_r, wfrac, ff, fn, out):
-    """Compiled twin of :func:`_centroid_pass`; ``out`` (n, 10) receives dx, dy, mass,
-    peak, nout, frac, dip, omin, bgres, valley."""
-    du, dv, dval, ru, rv, rval, routl = _buffers(rd)
-    for i in range(ix.shape[0]):
-        dx, dy, m, pk, nout, frac, dip, omin, bg, vl = _pass1(
-            frame, ix[i], iy[i], rd[i], sign[i], nbx[i], nby[i], noise[i], nbr_r[i], wfrac, ff, fn,
-            du, dv, dval, ru, rv, rval, routl)
-        out[i, 0] = dx
-        out[i, 1] = dy
-        out[i, 2] = m
-        out[i, 3] = pk
-        out[i, 4] = nout
-        out[i, 5] = frac
-        out[i, 6] = dip
-        out[i, 7] = omin
-        out[i, 8] = bg
-        out[i, 9] = vl
 
 
 def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rmax, wfrac, ff, fn, out):
@@ -1186,29 +1227,8 @@ if _numba is not None:  # pragma: no cover - depends on the environment
     _disk_peak = _numba.njit(cache=True, nogil=True)(_disk_peak)
     _pass1 = _numba.njit(cache=True, nogil=True)(_pass1)
     _buffers = _numba.njit(cache=True, nogil=True)(_buffers)
-    _centroid_kernel = _numba.njit(cache=True, nogil=True)(_centroid_kernel)
     _refine_kernel = _numba.njit(cache=True, nogil=True)(_refine_kernel)
     _ncc_kernel = _numba.njit(cache=True, nogil=True, fastmath=True)(_ncc_kernel)
-
-
-def _centroid_pass_fast(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
-    """:func:`_centroid_pass` by the compiled kernel (same arguments and result)."""
-    n = len(ix)
-    out = np.empty((n, 10))
-    if nb is None:
-        nbx = nby = np.full(n, np.nan)
-    else:
-        nbx = np.ascontiguousarray(nb[:, 0], dtype=np.float64)
-        nby = np.ascontiguousarray(nb[:, 1], dtype=np.float64)
-    rr = np.full(n, np.nan) if nbr_r is None else np.asarray(nbr_r, np.float64)
-    _centroid_kernel(frame, np.ascontiguousarray(ix, np.int64), np.ascontiguousarray(iy, np.int64),
-                     np.ascontiguousarray(rd, np.float64), np.ascontiguousarray(sign, np.float64), nbx, nby,
-                     np.ascontiguousarray(noise, np.float64), rr, float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out)
-    return dict(d=out[:, :2], mass=out[:, 2], peak=out[:, 3], nout=out[:, 4].astype(np.int64), frac=out[:, 5],
-                dip=out[:, 6], omin=out[:, 7], bgres=out[:, 8], valley=out[:, 9])
-
-
-_CENTROID_PASS = _centroid_pass if _numba is None else _centroid_pass_fast
 
 
 def _find_foreign(frame, ix, iy, rd, sign, peak):
@@ -1372,8 +1392,8 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
         Starting positions (x, y) in px, origin at the centre of the top-left pixel; within
         about half a pixel of the marker centre.
     radius : float or (N,) array_like
-        Radius of the integration disk in px: the blob radius plus ~1.5 px, so that the
-        disk contains the whole anti-aliased (and blurred) blob.
+        Radius of the integration disk in px: the blob's half long axis plus ~2-3 px, so
+        that the disk contains the whole anti-aliased (and blurred) blob.
     polarity : 1 or -1, or (N,) array_like
         1 for bright markers on a darker background, -1 for dark markers.
     neighbours : (N, 2) array_like, optional
@@ -3088,11 +3108,14 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         (correlation peak), status (ok / flagged / lost), x_pix, y_pix (pixel-level match,
         NaN where there was none), reason ("" when ok). x, y are NaN when lost; a flagged
         point carries its best guess. Frame 0 holds the refined picks (score 1). Reasons
-        (:data:`REASONS`): ``low_score``, ``ambiguous``, ``merged``, ``conflict``,
+        (:data:`REASONS`; module docstring, 7): ``low_score``, ``ambiguous``, ``merged``, ``conflict``,
         ``jump``, ``no_signal``, ``appearance``, ``edge``, ``out_of_frame``,
         ``lost_track`` (coasted longer than ``max_coast``), ``reacquired`` (first frame
         after a re-acquisition), ``fb_disagree``, ``no_pick``, ``pick_moved`` (frame 0:
-        the refinement moved the click by more than 1.5 px); :func:`check_stereo` adds
+        the refinement moved the click by more than 1.5 px, or saw a foreign blob or a
+        rough background; the click is kept), ``foreign`` (something bright not
+        explained by a known marker touches the disk), ``background`` (the background
+        around the marker is not flat enough for its contrast); :func:`check_stereo` adds
         ``stereo``.
 
     Raises
