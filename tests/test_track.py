@@ -639,6 +639,8 @@ def test_bad_input_messages():
         track_markers(frames, np.zeros((0, 2)), progress=False)
     with pytest.raises(ValueError, match="got a path"):
         track_markers("frames/", picks, progress=False)
+    with pytest.raises(ValueError, match=r"threshold must be in \[0, 1\)"):
+        refine_centroids(frames[0], picks, 5.0, threshold=1.5)
 
 
 def test_nan_pick_gives_a_lost_point(caplog):

@@ -2298,7 +2298,8 @@ class _Tracker:
             cand = cand[steady]
             if cand.size:
                 xx, yy, mm, inf = _refine(frame, XP[cand], YP[cand], self.rd[cand], self.sign[cand], self.noise[cand],
-                                          nb[cand], 2, rmax=self.rd[cand], nbr_r=self._nbr_r[cand], explain=np.ones(cand.size, bool))
+                                          nb[cand], 2, rmax=self.rd[cand], nbr_r=self._nbr_r[cand],
+                                          explain=np.ones(cand.size, bool))
                 X[cand], Y[cand], mass[cand] = xx, yy, mm
                 for k in ("foreign", "bgres", "peak", "valley"):
                     info[k][cand] = inf[k]
@@ -2365,13 +2366,16 @@ class _Tracker:
         return cand[o], prev[o]
 
     def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0, min_m=2):
-        """Markers ``chk`` whose displacement since their last ok frame disagrees
-        with that of their neighbours (those that moved like them then).
+        """Markers ``chk`` whose displacement since their last ok frame disagrees with that
+        of their neighbours (:meth:`_neighbours_then`).
 
         The neighbours' displacement over the same interval (:func:`_neighbour_prediction`)
-        predicts where the marker must be; further than its tolerance is inconsistent. Prevents a marker that coasted, or restarted, from
-        landing on a neighbour's or an unpicked marker's blob that happens to lie near its
-        extrapolated prediction.
+        predicts where the marker must be; further than its tolerance (at least
+        ``min_lim``) is inconsistent. With ``since`` the interval starts at the marker's
+        last position that fed the motion model instead, and the consistent ones are
+        returned; with ``both``, (inconsistent, consistent). Prevents a marker that
+        coasted, or restarted, from landing on a neighbour's or an unpicked marker's blob
+        that happens to lie near its extrapolated prediction.
         """
         okn = np.flatnonzero(ST == OK)
         T = res.x.shape[0]
@@ -2574,9 +2578,10 @@ class _Tracker:
         the other markers with a motion model (at their predictions) and the wide-searched
         markers whose match is unambiguous (:func:`_neighbour_prediction`: a robust affine
         map, or the mean displacement of a group that moved alike), so that static mount
-        and reference dots next to the wing, or a look-alike, do not decide. An ambiguous (or low-score) match is replaced by a search of radius 4 at
-        the prediction; an unambiguous match that disagrees with the prediction is made
-        ambiguous (flagged, not trusted), never moved. Without such a group the match
+        and reference dots next to the wing, or a look-alike, do not decide. An ambiguous
+        (or low-score) match is replaced by a search of radius 4 at the prediction; an
+        unambiguous match that disagrees with the prediction is made ambiguous (flagged,
+        not trusted), never moved. Without such a group the match
         stands as it is. Prevents a marker starting (or restarting) on its neighbour's or
         an unpicked marker's blob when its own is dim or the two look alike.
         """
