@@ -40,25 +40,7 @@ import tracemalloc
 
 import numpy as np
 
-
-def render_discs(centres, diameters, shape, *, bg=20.0, amp=200.0, noise_std=2.0, rng=None, ss=4):
-    """Bright anti-aliased discs (supersampled area coverage) on a flat background, uint8."""
-    H, W = shape
-    img = np.full(shape, bg, float)
-    o = (np.arange(ss) + 0.5) / ss - 0.5
-    for (cx, cy), d in zip(centres, diameters):
-        r = d / 2
-        x0, x1 = max(int(np.floor(cx - r - 1)), 0), min(int(np.ceil(cx + r + 2)), W)
-        y0, y1 = max(int(np.floor(cy - r - 1)), 0), min(int(np.ceil(cy + r + 2)), H)
-        if x1 <= x0 or y1 <= y0:
-            continue
-        xs = (np.arange(x0, x1)[:, None] + o[None, :]).ravel()
-        ys = (np.arange(y0, y1)[:, None] + o[None, :]).ravel()
-        inside = ((xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2) <= r * r
-        img[y0:y1, x0:x1] += amp * inside.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3))
-    if rng is not None:
-        img += rng.normal(0.0, noise_std, shape)
-    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+from wingphoto.synth import render_discs
 
 
 def wing_sequence(n_frames=100, n_markers=30, *, period=100, seed=0):
@@ -77,7 +59,7 @@ def wing_sequence(n_frames=100, n_markers=30, *, period=100, seed=0):
         ca, sa = np.cos(ang[k]), np.sin(ang[k])
         truth[k, :, 0] = hinge[0] + ca * local[:, 0] - sa * local[:, 1]
         truth[k, :, 1] = hinge[1] + sa * local[:, 0] + ca * local[:, 1]
-    frames = np.stack([render_discs(truth[k], diam, (512, 512), rng=rng) for k in range(n_frames)])
+    frames = np.stack([render_discs(truth[k], diam, (512, 512), bg=20.0, amp=200.0, noise_std=2.0, rng=rng, ss=4) for k in range(n_frames)])
     return frames, truth, diam
 
 

@@ -20,34 +20,10 @@ from wingphoto.track import (
     save_corrections,
     track_markers,
 )
+from wingphoto.synth import render_discs
 
 
 # --------------------------------------------------------------------------- helpers
-def render_discs(centres, diameters, shape, *, bg=30.0, amp=180.0, noise_std=0.0, rng=None,
-                 dtype=np.uint8, ss=8):
-    """Bright anti-aliased discs (area coverage by ss x ss supersampling) on a flat background."""
-    H, W = shape
-    img = np.full(shape, bg, float)
-    o = (np.arange(ss) + 0.5) / ss - 0.5
-    for (cx, cy), d in zip(centres, diameters):
-        if not (np.isfinite(cx) and np.isfinite(cy)):
-            continue
-        r = d / 2
-        x0, x1 = max(int(np.floor(cx - r - 1)), 0), min(int(np.ceil(cx + r + 2)), W)
-        y0, y1 = max(int(np.floor(cy - r - 1)), 0), min(int(np.ceil(cy + r + 2)), H)
-        if x1 <= x0 or y1 <= y0:
-            continue
-        xs = (np.arange(x0, x1)[:, None] + o[None, :]).ravel()
-        ys = (np.arange(y0, y1)[:, None] + o[None, :]).ravel()
-        inside = ((xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2) <= r * r
-        img[y0:y1, x0:x1] += amp * inside.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3))
-    if noise_std:
-        img += rng.normal(0.0, noise_std, shape)
-    if np.issubdtype(dtype, np.integer):
-        img = np.clip(np.round(img), 0, np.iinfo(dtype).max)
-    return img.astype(dtype)
-
-
 def moving_discs(seed=0, *, T=60, N=8, shape=(150, 190), noise_std=2.0, speed=8.0, dtype=np.uint8):
     """Discs on a grid moving along a sinusoid (peak speed ``speed`` px/frame)."""
     rng = np.random.default_rng(seed)

@@ -73,6 +73,7 @@ __all__ = [
     "rig_to_dict",
     "rig_from_dict",
     "load_rig",
+    "render_discs",
 ]
 
 log = logging.getLogger(__name__)
@@ -264,6 +265,58 @@ def load_rig(path):
         raise ValueError(f"rig file {path} is not valid JSON: {exc}") from None
     except KeyError as exc:
         raise ValueError(f"rig file {path} lacks {exc.args[0]!r}; expected the Bouguet names fc_left, cc_left, ...") from None
+
+
+def render_discs(centres, diameters, shape, *, bg=30.0, amp=180.0, noise_std=0.0, rng=None,
+                 dtype=np.uint8, ss=8):
+    """Bright anti-aliased discs on a flat background: a minimal 2D scene for unit tests.
+
+    Unlike :func:`render_flapping` there is no camera: each disc's area coverage of each
+    pixel is estimated by ``ss x ss`` supersampling, so a disc's intensity centroid is its
+    centre to ~1e-3 px.
+
+    Parameters
+    ----------
+    centres : (N, 2) array_like
+        Disc centres (x, y) in px; rows with NaN are skipped.
+    diameters : (N,) array_like
+        Disc diameters in px.
+    shape : (H, W)
+        Image shape.
+    bg, amp : float
+        Background level and disc brightness above it (grey levels).
+    noise_std : float
+        Additive Gaussian noise (grey levels) drawn from ``rng``
+        (``np.random.default_rng(0)`` when None).
+    dtype : numpy dtype
+        Output type; integer types are rounded and clipped.
+    ss : int
+        Supersampling per axis.
+
+    Returns
+    -------
+    (H, W) ndarray of ``dtype``
+    """
+    H, W = shape
+    img = np.full(shape, bg, float)
+    o = (np.arange(ss) + 0.5) / ss - 0.5
+    for (cx, cy), d in zip(centres, diameters):
+        if not (np.isfinite(cx) and np.isfinite(cy)):
+            continue
+        r = d / 2
+        x0, x1 = max(int(np.floor(cx - r - 1)), 0), min(int(np.ceil(cx + r + 2)), W)
+        y0, y1 = max(int(np.floor(cy - r - 1)), 0), min(int(np.ceil(cy + r + 2)), H)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        xs = (np.arange(x0, x1)[:, None] + o[None, :]).ravel()
+        ys = (np.arange(y0, y1)[:, None] + o[None, :]).ravel()
+        inside = ((xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2) <= r * r
+        img[y0:y1, x0:x1] += amp * inside.reshape(y1 - y0, ss, x1 - x0, ss).mean(axis=(1, 3))
+    if noise_std:
+        img += (np.random.default_rng(0) if rng is None else rng).normal(0.0, noise_std, shape)
+    if np.issubdtype(dtype, np.integer):
+        img = np.clip(np.round(img), 0, np.iinfo(dtype).max)
+    return img.astype(dtype)
 
 
 # ====================================================================== ray machinery
