@@ -238,8 +238,8 @@ def test_no_pixel_decode_at_open(tmp_path, monkeypatch):
 
 def test_no_pixel_read_at_open_uncompressed(tiff_folder, monkeypatch):
     reads = []
-    original = wio._FrameStore.read
-    monkeypatch.setattr(wio._FrameStore, "read", lambda self, j: reads.append(int(j)) or original(self, j))
+    original = wio.sequence._FrameStore.read
+    monkeypatch.setattr(wio.sequence._FrameStore, "read", lambda self, j: reads.append(int(j)) or original(self, j))
     seq = read_sequence(tiff_folder)
     assert reads == [] and seq.shape == (5, H, W)
     sub = seq[::2]
@@ -339,7 +339,7 @@ def test_error_mixed_sizes_tiff_at_open_without_decoding(tmp_path, monkeypatch):
     write_tiff(tmp_path / "f3.tif", frame(3, shape=(W, H)))  # transposed: the x/y-swap case
     write_tiff(tmp_path / "f4.tif", frame(4, shape=(5, 5)))
     monkeypatch.setattr(tifffile.TiffPage, "asarray", lambda *a, **k: pytest.fail("pixels decoded"))
-    monkeypatch.setattr(wio._FrameStore, "read", lambda *a, **k: pytest.fail("pixels read"))
+    monkeypatch.setattr(wio.sequence._FrameStore, "read", lambda *a, **k: pytest.fail("pixels read"))
     with pytest.raises(ValueError, match=rf"f3\.tif has frames of shape \(H, W\) = \({W}, {H}\) but .*f0\.tif has \({H}, {W}\)"):
         read_sequence(tmp_path)
 

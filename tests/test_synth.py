@@ -280,12 +280,12 @@ def test_static_point_behind_the_wing_is_occluded(rig):
     dot = S + B @ np.array([0.0, 0.0, 15.0])
     tri = S + np.array([[-15.0, -15.0, 0.0], [15.0, -15.0, 0.0], [0.0, 15.0, 0.0]]) @ B.T
     level = 40.0
-    scene = synth._Scene(
+    scene = synth.wing._Scene(
         points=lambda t: (np.vstack([dot, S + B @ [40.0, 0.0, 15.0]]), np.tile(-B[:, 2], (2, 1))),
         diameters=np.array([2.5, 2.5]), static=np.array([True, True]), paint=200.0, light=-B[:, 2],
         membrane=lambda t: (tri, np.array([[0, 1, 2]]), -B[:, 2]), membrane_level=level,
     )
-    imgs, _, pts2d, vis = synth._render_sequence(
+    imgs, _, pts2d, vis = synth.flapping._render_sequence(
         rig, scene, np.zeros(1), fps=1.0, blur_sigma=0.0, noise_std=0.0, dtype=np.float32,
         rng=np.random.default_rng(0), motion_blur=False, exposure=0.0, supersample=4,
         edge_on_deg=72.0, merge_gap_px=1.5)

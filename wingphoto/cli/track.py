@@ -1,0 +1,29 @@
+"""``wingphoto track``: track the picked markers through one camera's sequence -> tracks CSV."""
+from __future__ import annotations
+
+
+def add_parser(sub):
+    t = sub.add_parser(
+        "track",
+        help="track markers through one camera's sequence -> tracks CSV",
+        description="Track the picked markers through an image sequence (folder, glob or multi-page "
+        "TIFF). Points the tracker is unsure of are flagged or lost, never guessed; review them in the "
+        "tracking notebook.",
+    )
+    t.add_argument("--frames", required=True, help="folder, glob pattern or multi-page TIFF of the sequence")
+    t.add_argument("--picks", required=True, help="picks JSON saved by the picker widget (or data-samples' picks.json)")
+    t.add_argument("--camera", default="left", choices=["left", "right"], help="which view's picks to use")
+    t.add_argument("--out", required=True, help="output tracks CSV")
+    t.add_argument("--checkpoint", default=None, help="checkpoint file: a rerun resumes from it")
+    return t
+
+
+def run(args):
+    from .. import pipeline
+
+    tracks = pipeline.track_folder(args.frames, args.picks, camera=args.camera, out=args.out,
+                                   checkpoint=args.checkpoint)
+    counts = tracks["status"].value_counts().to_dict()
+    print(f"tracked {tracks['point'].nunique()} points over {tracks['frame'].nunique()} frames: {counts}")
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,26 @@
+"""``wingphoto triangulate``: left/right tracks + a stereo calibration -> 3D points CSV."""
+from __future__ import annotations
+
+
+def add_parser(sub):
+    g = sub.add_parser(
+        "triangulate",
+        help="triangulate left/right tracks with a stereo calibration -> 3D points CSV",
+        description="Triangulate the trusted (ok/manual/interpolated) left/right observations with the "
+        "toolbox's stereo_triangulation; writes frame, point, X, Y, Z (mm, left camera frame), reproj_err (px).",
+    )
+    g.add_argument("--calib", required=True, help="Calib_Results_stereo.mat (ours or the toolbox's)")
+    g.add_argument("--left", required=True, help="left tracks CSV")
+    g.add_argument("--right", required=True, help="right tracks CSV")
+    g.add_argument("--out", required=True, help="output 3D points CSV")
+    return g
+
+
+def run(args):
+    from .. import pipeline
+
+    points = pipeline.triangulate_files(args.calib, args.left, args.right, out=args.out)
+    print(f"triangulated {points[['X']].notna().sum().iloc[0]} of {len(points)} point-frames; "
+          f"median reprojection error {points['reproj_err'].median():.3f} px")
+    print(f"wrote {args.out}")
+    return 0
