@@ -61,6 +61,7 @@ __all__ = [
     "CameraCalibration",
     "calibrate_camera",
     "StereoCalibration",
+    "RIG_PARAMETER_NAMES",
     "calibrate_stereo",
     "suggest_suppress",
 ]
@@ -1301,6 +1302,14 @@ def calibrate_camera(
 
 
 # ============================================================== stereo
+#: Names of the rows/columns of :attr:`StereoCalibration.covariance`, in order.
+RIG_PARAMETER_NAMES = tuple(
+    [f"{k}_{s}" if n == 1 else f"{k}_{s}[{i}]" for s in ("left", "right")
+     for k, n in (("fc", 2), ("cc", 2), ("alpha_c", 1), ("kc", 5)) for i in range(n)]
+    + [f"om[{i}]" for i in range(3)] + [f"T[{i}]" for i in range(3)]
+)
+
+
 @dataclass(frozen=True)
 class StereoCalibration:
     """Joint calibration of a stereo rig (the toolbox's Calib_Results_stereo).
@@ -1337,6 +1346,21 @@ class StereoCalibration:
         ``omc_left_error``, ``Tc_left_error``.
     mono_left, mono_right : CameraCalibration
         The single-camera calibrations used as the starting point.
+    covariance : (26, 26) ndarray of float64
+        One-sigma covariance ``sigma**2 (J^T J)^-1`` (``sigma`` the residual standard
+        deviation, px) of the rig parameters of the joint refinement, in the order of
+        :attr:`parameter_names`: ``fc_left[0..1], cc_left[0..1], alpha_c_left,
+        kc_left[0..4]``, the same for the right camera, ``om[0..2]`` (rad), ``T[0..2]``
+        (mm). The per-pair board poses, also estimated, are marginalised out (the
+        sub-block of the full inverse). Parameters held fixed (e.g. ``alpha_c``,
+        ``kc[4]`` by default) have zero rows and columns; with a fixed aspect ratio the
+        ``fc[1]`` row repeats ``fc[0]``'s. ``3 * sqrt(diag(covariance))`` equals
+        :attr:`uncertainty` entry by entry. Use it to propagate the calibration's
+        uncertainty to 3D points.
+    parameter_names : tuple of str
+        The 26 names of the rows of :attr:`covariance` (:data:`RIG_PARAMETER_NAMES`),
+        e.g. ``"fc_left[0]"``, ``"alpha_c_right"``, ``"om[2]"``, ``"T[0]"`` (the row
+        labels of :meth:`compare`).
     """
 
     rig: StereoRig
@@ -1361,7 +1385,15 @@ class StereoCalibration:
     mono_right: CameraCalibration
     pattern_size: tuple
     square_size: tuple
+    covariance: np.ndarray | None = field(default=None, repr=False)
+    parameter_names: tuple = RIG_PARAMETER_NAMES
     _inputs: dict = field(repr=False, default_factory=dict)
+
+    def parameter_sigma(self):
+        """Return ``{parameter name: 1-sigma}`` from :attr:`covariance` (one third of ``uncertainty``)."""
+        if self.covariance is None:
+            raise ValueError("this StereoCalibration has no covariance (it was not made by calibrate_stereo)")
+        return dict(zip(self.parameter_names, np.sqrt(np.diag(self.covariance))))
 
     @property
     def camera_uncertainty(self):
@@ -1541,8 +1573,18 @@ def _stereo_core(obs_l, obs_r, objs, init_l, init_r, om0, T0, poses0, est_l, est
             out.append(r)
         return out
 
+    # 1-sigma covariance of the rig parameters (board poses marginalised out: for a
+    # Gaussian that is the sub-block), expanded to all 26 rig parameters, zero for fixed ones
+    idx = np.concatenate([np.flatnonzero(fl), 10 + np.flatnonzero(fr), 20 + np.arange(6)])
+    rig_cov = np.zeros((26, 26))
+    sub = cov[:e0, :e0] * sigma**2
+    rig_cov[np.ix_(idx, idx)] = 0.5 * (sub + sub.T)  # exactly symmetric; the diagonal is unchanged
+    for off, est in ((0, est_l), (10, est_r)):
+        if not est.aspect_ratio:  # fc[1] is fc[0]: fully correlated copy
+            rig_cov[off + 1, :] = rig_cov[off, :]
+            rig_cov[:, off + 1] = rig_cov[:, off]
     return {
-        "il": il, "ir": ir, "om": om, "T": T, "E": E, "errl": errl, "errr": errr,
+        "il": il, "ir": ir, "om": om, "T": T, "E": E, "errl": errl, "errr": errr, "rig_cov": rig_cov,
         "om_error": perr[g0:g0 + 3], "T_error": perr[g0 + 3:e0], "E_error": perr[e0:].reshape(P, 6),
         "el": el, "er": er, "sigma": sigma, "res_l": per_pair(el, ml, sl), "res_r": per_pair(er, mr, sr),
     }
@@ -1677,6 +1719,7 @@ def _stereo_from_views(
         board_points=tuple(_frozen(b) for b in boards), residuals_left=tuple(rl), residuals_right=tuple(rr),
         omc_left=_frozen(om), Tc_left=_frozen(T), omc_left_error=_frozen(ome), Tc_left_error=_frozen(Te),
         mono_left=mono_l, mono_right=mono_r, pattern_size=tuple(pattern_size), square_size=tuple(square_size),
+        covariance=_frozen(sol["rig_cov"]), parameter_names=RIG_PARAMETER_NAMES,
         _inputs={
             "views_l": views_l, "views_r": views_r, "boards": boards, "size_l": size_l, "size_r": size_r,
             "est_l": est_l, "est_r": est_r, "pattern_size": pattern_size, "square_size": square_size,
