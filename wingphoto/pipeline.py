@@ -82,25 +82,25 @@ def calibrate_folders(left, right, pattern_size, square_size, *, out=None, progr
 
 
 def load_picks(path, camera):
-    """Read a saved picks file (the picker's JSON) as the table the trackers take.
+    """Read one camera's picks from a picks file (JSON or CSV) as the tracker's table.
+
+    Delegates to :func:`wingphoto.picks.load_picks` (formats: ``docs/picks.md``).
 
     Parameters
     ----------
     path : str or Path
-        Picks JSON written by :class:`wingphoto.widgets.state.PickerState` (``save``).
+        Picks JSON written by the picker (``wingphoto pick``, the widget) or a CSV with
+        columns ``camera,point,frame,x,y[,half_w,half_h]``.
     camera : {"left", "right"}
 
     Returns
     -------
     pandas.DataFrame
-        Columns point, x, y, half_w, half_h, half_size; one row per marker number.
+        Columns point, frame, x, y, half_w, half_h, half_size; one row per picked marker.
     """
-    from .widgets.state import PickerState
+    from .picks import load_picks as _load_picks
 
-    state = PickerState.load(path)
-    if camera not in state.cameras:
-        raise ValueError(f"{path} has no picks for camera {camera!r} (it has {list(state.cameras)})")
-    return state.to_frame(camera)
+    return _load_picks(path, camera)
 
 
 def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, progress=True, **options):
@@ -177,16 +177,38 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
     return pd.concat([tl, tr], ignore_index=True), points
 
 
-def triangulate_files(calib, left, right, *, out=None):
+def triangulate_files(calib, left, right, *, out=None, force=False):
     """Triangulate two tracks CSV files with a stereo calibration .mat.
+
+    Parameters
+    ----------
+    calib : str or Path
+        ``Calib_Results_stereo.mat``.
+    left, right : str or Path
+        Tracks CSV of each camera (the same combined two-camera file may be given as both).
+    out : str or Path, optional
+        3D points CSV to write.
+    force : bool
+        Go on despite a failed reprojection check (see
+        :func:`wingphoto.triangulate.triangulate_tracks`).
 
     Returns
     -------
     pandas.DataFrame
         frame, point, X, Y, Z (mm, left camera frame), reproj_err (px).
+
+    Raises
+    ------
+    ValueError
+        The files do not belong together (see :func:`~wingphoto.triangulate.triangulate_tracks`);
+        the message names the files.
     """
     rig, _ = load_bouguet_stereo(calib)
-    points = triangulate_tracks(read_tracks_csv(left), read_tracks_csv(right), rig)
+    tracks_left, tracks_right = read_tracks_csv(left), read_tracks_csv(right)
+    try:
+        points = triangulate_tracks(tracks_left, tracks_right, rig, force=force)
+    except ValueError as exc:
+        raise ValueError(f"{exc} [left {left}, right {right}, calibration {calib}]") from None
     if out is not None:
         write_points_csv(points, out)
     return points
