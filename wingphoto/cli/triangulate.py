@@ -13,13 +13,16 @@ def add_parser(sub):
     g.add_argument("--left", required=True, help="left tracks CSV")
     g.add_argument("--right", required=True, help="right tracks CSV")
     g.add_argument("--out", required=True, help="output 3D points CSV")
+    g.add_argument("--force", action="store_true",
+                   help="triangulate even when the median reprojection error says the tracks do not fit the "
+                   "calibration (swapped cameras, a frame offset, another setup's calibration)")
     return g
 
 
 def run(args):
     from .. import pipeline
 
-    points = pipeline.triangulate_files(args.calib, args.left, args.right, out=args.out)
+    points = pipeline.triangulate_files(args.calib, args.left, args.right, out=args.out, force=args.force)
     print(f"triangulated {points[['X']].notna().sum().iloc[0]} of {len(points)} point-frames; "
           f"median reprojection error {points['reproj_err'].median():.3f} px")
     print(f"wrote {args.out}")

@@ -81,14 +81,22 @@ def _mat_camera(m, suffix, path):
     alpha = _mat_vector(m, "alpha_c" + suffix, 1, path)
     image_size = None
     if "nx" in m and "ny" in m:
-        image_size = (int(np.asarray(m["nx"]).reshape(-1)[0]), int(np.asarray(m["ny"]).reshape(-1)[0]))
-    cam = Camera(
-        fc=fc,
-        cc=cc,
-        kc=np.zeros(5) if kc is None else kc,
-        alpha_c=0.0 if alpha is None else float(alpha[0]),
-        image_size=image_size,
-    )
+        nxy = [np.asarray(m[k], dtype=np.float64).reshape(-1)[:1] for k in ("nx", "ny")]
+        if any(v.size != 1 or not np.isfinite(v[0]) for v in nxy):
+            raise ValueError(f"{path}: variables nx, ny must be the image width and height in pixels")
+        image_size = (int(nxy[0][0]), int(nxy[1][0]))
+    try:
+        cam = Camera(
+            fc=fc,
+            cc=cc,
+            kc=np.zeros(5) if kc is None else kc,
+            alpha_c=0.0 if alpha is None else float(alpha[0]),
+            image_size=image_size,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc} (camera{suffix or ''}); the file does not hold a valid calibration") from None
+    if image_size is not None and min(image_size) < 1:
+        raise ValueError(f"{path}: image size nx, ny = {image_size} is not positive; the file is corrupt")
     unc = {}
     for key, shape in _CAMERA_ERROR_SHAPES.items():
         name = f"{key}{suffix}_error"
@@ -99,6 +107,23 @@ def _mat_camera(m, suffix, path):
         if v is not None:
             unc[key] = float(v[0]) if shape == () else _readonly(v)
     return cam, unc
+
+
+def _mat_rotation(m, path, tol=1e-6):
+    """The stereo rotation R, checked to be a rotation (orthonormal, determinant +1)."""
+    R = np.asarray(m["R"], dtype=np.float64)
+    if R.shape != (3, 3):
+        raise ValueError(f"{path}: variable R has shape {R.shape}, expected (3, 3)")
+    if not np.all(np.isfinite(R)):
+        raise ValueError(f"{path}: variable R is not finite; the file does not hold a valid calibration")
+    ortho = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    det = float(np.linalg.det(R))
+    if ortho > tol or abs(det - 1.0) > tol:
+        raise ValueError(
+            f"{path}: variable R is not a rotation matrix (|R'R - I| = {ortho:.2g}, det(R) = {det:.3g}); "
+            "the file is corrupt or was edited: recalibrate or restore the toolbox's file"
+        )
+    return R
 
 
 def _column(v):
@@ -472,13 +497,19 @@ def load_bouguet_stereo(path):
             f"Calib_Results_stereo.mat"
         )
     T = _mat_vector(m, "T", 3, path)
-    if "om" in m:
-        om = _mat_vector(m, "om", 3, path)
-    else:
-        R = np.asarray(m["R"], dtype=np.float64)
-        if R.shape != (3, 3):
-            raise ValueError(f"{path}: variable R has shape {R.shape}, expected (3, 3)")
+    om = _mat_vector(m, "om", 3, path) if "om" in m else None
+    R = _mat_rotation(m, path) if "R" in m else None
+    if om is not None and not np.all(np.isfinite(om)):
+        raise ValueError(f"{path}: variable om is not finite ({om}); the file does not hold a valid calibration")
+    if om is None:
         om = rodrigues_inverse(R)
+    elif R is not None and np.max(np.abs(rodrigues(om) - R)) > 1e-6:
+        raise ValueError(
+            f"{path}: variables om and R disagree (R(om) differs from R by up to "
+            f"{np.max(np.abs(rodrigues(om) - R)):.2g}); the file was edited or mixes two calibrations"
+        )
+    if not np.all(np.isfinite(T)):
+        raise ValueError(f"{path}: variable T is not finite ({T}); the file does not hold a valid calibration")
     rig = StereoRig(left, right, om=om, T=T)
     uncertainty = {f"{k}_left": v for k, v in unc_left.items()}
     uncertainty.update({f"{k}_right": v for k, v in unc_right.items()})

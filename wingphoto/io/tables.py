@@ -14,6 +14,10 @@ TRACK_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status"]
 POINT_COLUMNS = ["frame", "point", "X", "Y", "Z", "reproj_err"]
 _TRACK_KINDS = {"camera": "str", "frame": "int", "point": "int", "x": "float", "y": "float", "score": "float", "status": "str"}
 _POINT_KINDS = {"frame": "int", "point": "int", "X": "float", "Y": "float", "Z": "float", "reproj_err": "float"}
+#: Optional tracks columns with a fixed kind when present: ``reason`` is text ("" when there
+#: is none, never NaN, so corrections can be applied to tracks read back), the others are
+#: floats (px; ``sigma`` the 1-sigma per-axis positional uncertainty, NaN where unknown).
+_TRACK_OPTIONAL = {"x_pix": "float", "y_pix": "float", "reason": "text", "sigma": "float"}
 
 
 def _string_dtype():
@@ -71,8 +75,12 @@ def empty_points():
     return _empty_table(_POINT_KINDS)
 
 
-def _coerce_table(df, kinds, what, source):
-    """Check the standard columns and cast them to their dtypes (extra columns untouched)."""
+def _coerce_table(df, kinds, what, source, optional=None):
+    """Check the standard columns and cast them to their dtypes (extra columns untouched).
+
+    ``optional`` columns are cast when present: ``"text"`` is str with missing values as
+    ``""``, the other kinds as in ``kinds``.
+    """
     import pandas as pd
 
     if not isinstance(df, pd.DataFrame):
@@ -81,8 +89,12 @@ def _coerce_table(df, kinds, what, source):
     if missing:
         raise ValueError(f"{source} lacks the column(s) {missing}; a {what} table needs {list(kinds)}")
     out = df.copy()
-    for col, kind in kinds.items():
+    present = {c: k for c, k in (optional or {}).items() if c in out.columns}
+    for col, kind in {**kinds, **present}.items():
         s = out[col]
+        if kind == "text":
+            out[col] = _as_strings(s.where(s.notna(), ""))
+            continue
         if kind == "str":
             out[col] = _as_strings(s)
             continue
@@ -110,22 +122,26 @@ def _write_table(df, path):
         df.to_csv(f, index=False, lineterminator="\n", na_rep="")
 
 
-def _read_table(path, kinds, what):
+def _read_table(path, kinds, what, optional=None):
     import pandas as pd
 
     path = Path(path)
     if not path.is_file():
+        if path.is_dir():
+            raise IsADirectoryError(f"{what} file {path} is a folder; give the CSV file inside it")
         raise FileNotFoundError(f"{what} file {path} not found; check the path")
+    all_kinds = {**kinds, **(optional or {})}
     try:
         header = pd.read_csv(path, nrows=0, encoding="utf-8").columns
-        na_values = {c: [""] if kinds.get(c) == "str" else ["", "NaN", "nan"] for c in header}
-        dtype = {c: object for c, k in kinds.items() if k == "str" and c in header}
+        na_values = {c: {"str": [""], "text": []}.get(all_kinds.get(c), ["", "NaN", "nan"]) for c in header}
+        dtype = {c: object for c, k in all_kinds.items() if k in ("str", "text") and c in header}
         # pandas >= 3 parses floats exactly by default and deprecates float_precision
         exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
         df = pd.read_csv(path, dtype=dtype, na_values=na_values, keep_default_na=False, encoding="utf-8", **exact)
     except Exception as exc:
-        raise ValueError(f"cannot read {path} as a {what} CSV table ({exc}); check the file") from exc
-    return _coerce_table(df, kinds, what, f"{what} file {path}")
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"cannot read {path} as a {what} CSV table ({msg}); check the file") from exc
+    return _coerce_table(df, kinds, what, f"{what} file {path}", optional)
 
 
 def write_tracks_csv(tracks, path):
@@ -155,7 +171,7 @@ def write_tracks_csv(tracks, path):
     >>> back.equals(t.astype(back.dtypes.to_dict()))
     True
     """
-    _write_table(_coerce_table(tracks, _TRACK_KINDS, "tracks", "tracks"), path)
+    _write_table(_coerce_table(tracks, _TRACK_KINDS, "tracks", "tracks", _TRACK_OPTIONAL), path)
 
 
 def read_tracks_csv(path):
@@ -170,7 +186,9 @@ def read_tracks_csv(path):
     tracks : pandas.DataFrame
         ``camera`` and ``status`` as str, ``frame`` and ``point`` as int64, ``x``,
         ``y``, ``score`` as float64 (empty fields are NaN); an empty file keeps its
-        columns and dtypes.
+        columns and dtypes. Optional columns when present: ``reason`` as str (an empty
+        field is ``""``, so :func:`wingphoto.corrections.apply_corrections` works on the
+        table), ``x_pix``, ``y_pix``, ``sigma`` (px) as float64.
 
     Raises
     ------
@@ -179,7 +197,7 @@ def read_tracks_csv(path):
     ValueError
         Not a CSV, a required column is missing, or frame/point are not whole numbers.
     """
-    return _read_table(path, _TRACK_KINDS, "tracks")
+    return _read_table(path, _TRACK_KINDS, "tracks", _TRACK_OPTIONAL)
 
 
 def write_points_csv(points, path):
