@@ -23,7 +23,7 @@ Conventions (pixel origin, frames, units, names): ``docs/conventions.md``.
 """
 from .atomic import atomic_write
 from .bouguet import BouguetCalib, load_bouguet_calib, load_bouguet_stereo, save_bouguet_calib, save_bouguet_stereo
-from .sequence import IMAGE_EXTENSIONS, Sequence, read_sequence
+from .sequence import IMAGE_EXTENSIONS, Sequence, SequenceWarning, parse_numbering, read_sequence
 from .tables import (
     POINT_COLUMNS,
     TRACK_COLUMNS,
@@ -43,6 +43,8 @@ __all__ = [
     "IMAGE_EXTENSIONS",
     "Sequence",
     "read_sequence",
+    "SequenceWarning",
+    "parse_numbering",
     # Bouguet toolbox
     "BouguetCalib",
     "load_bouguet_calib",

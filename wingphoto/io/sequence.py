@@ -10,7 +10,7 @@ import re
 import threading
 import warnings
 import weakref
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,79 @@ _TIFF_SUFFIXES = {".tif", ".tiff"}
 _SUFFIX_KIND = {".tif": "TIFF", ".tiff": "TIFF", ".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".bmp": "BMP"}
 _GLOB_CHARS = re.compile(r"[*?\[]")
 _MAX_OPEN_FILES = 8  # open TIFF handles / memory maps kept per sequence (least recently used)
+#: Numbering gaps are warned about only when at least this many files follow one regular
+#: numbering: with fewer, a jump in the numbers says little about a dropped frame.
+GAP_WARNING_MIN_FILES = 10
+_NUMBERED = re.compile(r"^(.*?)(\d+)(\D*)$")
+
+
+class SequenceWarning(UserWarning):
+    """A sequence looks wrong but can still be read: stray files, numbering gaps, ...
+
+    Raised as a warning (``warnings.warn``) by :func:`read_sequence` and the pipeline;
+    filter it with ``warnings.simplefilter("ignore", SequenceWarning)`` once checked, or
+    make it an error with ``"error"``. :func:`wingphoto.check_sequence` reports the same
+    findings (and more: duplicates, blank frames, jumps) as data.
+    """
+
+
+def parse_numbering(paths):
+    """Find the numbering of a list of frame files from their names.
+
+    The dominant name pattern is ``<prefix><number><tail><.ext>`` (the last run of digits
+    is the frame number); zero-padded numbers also fix the width. A file that does not fit
+    the pattern (``frame_0030 copy.tif``, ``frame_0030(1).tif``, ``notes.tif``) is a stray.
+
+    Parameters
+    ----------
+    paths : list of Path
+
+    Returns
+    -------
+    numbers : (T,) ndarray of int64 or None
+        The number of each file, in the given order; a stray gets the number that follows
+        the pattern's prefix in its name, or -1. None when the names follow no pattern
+        (fewer than half of them share one).
+    strays : list of Path
+        Files whose names do not fit the pattern.
+    gaps : list of int
+        Numbers missing from the regular run of the pattern's files (step = the most
+        common difference), in increasing order.
+    """
+    paths = [Path(p) for p in paths]
+    keys = []
+    for p in paths:
+        m = _NUMBERED.match(p.stem)
+        keys.append((m.group(1), m.group(3), p.suffix.lower(), m.group(2)) if m else None)
+    counts = Counter(k[:3] for k in keys if k)
+    if not counts:
+        return None, [], []
+    template, count = counts.most_common(1)[0]
+    if count < max(2, 0.5 * len(paths)):
+        return None, [], []
+    members = [k for k in keys if k and k[:3] == template]
+    widths = Counter(len(k[3]) for k in members)
+    padded = any(k[3].startswith("0") and len(k[3]) > 1 for k in members)
+    width = widths.most_common(1)[0][0] if padded else None
+    numbers, strays, good = [], [], []
+    for p, k in zip(paths, keys):
+        fits = k is not None and k[:3] == template and (width is None or len(k[3]) == width)
+        if fits:
+            numbers.append(int(k[3]))
+            good.append(int(k[3]))
+            continue
+        strays.append(p)
+        m = re.match(re.escape(template[0]) + r"(\d+)", p.stem)
+        numbers.append(int(m.group(1)) if m else -1)
+    gaps = []
+    uniq = np.unique(good)
+    if uniq.size >= 3:
+        diffs = np.diff(uniq)
+        step = Counter(diffs.tolist()).most_common(1)[0][0]
+        if step > 0 and np.all(diffs % step == 0):
+            expected = np.arange(uniq[0], uniq[-1] + 1, step)
+            gaps = [int(v) for v in np.setdiff1d(expected, uniq)]
+    return np.asarray(numbers, dtype=np.int64), strays, gaps
 _LUMA = (0.299, 0.587, 0.114)  # ITU-R BT.601 weights, as cv2.cvtColor and MATLAB rgb2gray
 
 
@@ -313,6 +386,9 @@ class _FrameStore:
         self.shape = None  # (H, W)
         self.dtype = None
         self.reference = None  # description of the frame that fixed shape and dtype
+        from .formats._base import file_signature
+
+        self.signatures = [file_signature(p) for p in self.paths]
         for i, path in enumerate(self.paths):
             if self.is_tiff[i]:
                 frames, hw, dtype, byteorder = _scan_tiff(path, self.as_gray)
@@ -333,6 +409,17 @@ class _FrameStore:
         self.file_of = np.asarray(file_of, dtype=np.int64)
         self.page_of = np.asarray(page_of, dtype=np.int64)
         self.offset_of = np.asarray(offset_of, dtype=np.int64)
+        # the camera's own numbering, from the file names when each file is one frame
+        self.fps = None
+        self.timestamps = None
+        self.info = {"format": "image files"}
+        numbers, self.strays, self.gaps = parse_numbering(self.paths)
+        if numbers is not None and max(self.frames_in_file) == 1:
+            self.frame_numbers = numbers
+        else:
+            self.frame_numbers = np.arange(len(self.file_of), dtype=np.int64)
+            if max(self.frames_in_file) > 1:
+                self.gaps = []
         self._init_handles()
 
     # ------------------------------------------------------------ housekeeping
@@ -372,6 +459,12 @@ class _FrameStore:
     def _check(self, where, shape, dtype):
         shape = tuple(int(s) for s in shape)
         if self.shape is None:
+            if np.dtype(dtype).kind == "i":
+                raise ValueError(
+                    f"{where} holds signed {np.dtype(dtype)} pixels; wingphoto reads unsigned 8/16-bit "
+                    f"(or float) grey frames: convert the files (e.g. to uint16 with the offset your "
+                    f"camera software documents) before reading them"
+                )
             self.shape, self.dtype, self.reference = shape, np.dtype(dtype), str(where)
             return
         if shape != self.shape:
@@ -391,10 +484,36 @@ class _FrameStore:
         """(path, page) of global frame ``j``."""
         return self.paths[self.file_of[j]], int(self.page_of[j])
 
+    def _check_unchanged(self, i):
+        """Raise when file ``i`` was rewritten or replaced since the sequence was opened."""
+        from .formats._base import changed_error, file_signature
+
+        path = self.paths[i]
+        before = self.signatures[i] if getattr(self, "signatures", None) else None
+        if before is None:
+            return
+        try:
+            now = file_signature(path)
+        except FileNotFoundError:
+            raise FileNotFoundError(f"frame file {path} no longer exists; it was moved or deleted after opening") from None
+        if now == before:
+            return
+        with self._lock:  # drop a stale memory map / TIFF handle
+            h = self._handles.pop(i, None)
+            if h is not None and hasattr(h, "close"):
+                with contextlib.suppress(Exception):
+                    h.close()
+        if self.is_tiff[i]:
+            _scan_tiff(path, self.as_gray)  # raises its own message for a truncated/corrupt file
+        else:
+            _decode_image_file(path, self.as_gray)
+        raise changed_error(path, before, now)
+
     def read(self, j):
         """Read global frame ``j`` as a new, writable (H, W) array."""
         i = int(self.file_of[j])
         path = self.paths[i]
+        self._check_unchanged(i)
         if not self.is_tiff[i]:
             arr = _decode_image_file(path, self.as_gray)
         elif self.offset_of[j] >= 0:
@@ -527,6 +646,54 @@ class Sequence:
         return (w, h)
 
     @property
+    def fps(self):
+        """Frame rate in frames/s from the file's header (None when the files do not say)."""
+        return getattr(self._store, "fps", None)
+
+    @property
+    def frame_numbers(self):
+        """``(T,)`` int64: the camera's own image numbers of these frames.
+
+        A ``.cine`` starts at its header's first image number (trigger-relative, may be
+        large or negative), a ``.mraw`` at its start frame, numbered image files carry the
+        number in their names (-1 for a stray file without one); otherwise 0, 1, 2, ...
+        """
+        numbers = getattr(self._store, "frame_numbers", None)
+        if numbers is None:
+            return self._index.copy()
+        return np.asarray(numbers, dtype=np.int64)[self._index]
+
+    @property
+    def timestamps(self):
+        """``(T,)`` float64 seconds of each frame where the file records them, else None.
+
+        ``.cine``: relative to the trigger time; video: presentation time from the first
+        frame.
+        """
+        ts = getattr(self._store, "timestamps", None)
+        return None if ts is None else np.asarray(ts, dtype=np.float64)[self._index]
+
+    @property
+    def info(self):
+        """Header values of the source (format, pixel format, camera, ...), as a dict."""
+        return dict(getattr(self._store, "info", {}))
+
+    @property
+    def variable_frame_rate(self):
+        """True when a video's frame intervals vary (then :attr:`timestamps` are the truth)."""
+        return bool(getattr(self._store, "variable_frame_rate", False))
+
+    @property
+    def strays(self):
+        """Files of the source whose names do not fit its numbering (see :func:`parse_numbering`)."""
+        return list(getattr(self._store, "strays", []))
+
+    @property
+    def gaps(self):
+        """Numbers missing from the source files' regular numbering."""
+        return list(getattr(self._store, "gaps", []))
+
+    @property
     def paths(self):
         """Files holding this sequence's frames, in frame order, each listed once."""
         seen = dict.fromkeys(int(i) for i in self._store.file_of[self._index])
@@ -642,7 +809,7 @@ class Sequence:
         return f"<Sequence of {t} frames, {h}x{w} (H x W) {self.dtype}, from {self._store.description}>"
 
 
-def read_sequence(source, *, as_gray=False, memmap=True):
+def read_sequence(source, *, as_gray=False, memmap=True, values="linear", strays="warn"):
     """Open an image sequence lazily: frames are read from disk only when accessed.
 
     Parameters
@@ -655,6 +822,9 @@ def read_sequence(source, *, as_gray=False, memmap=True):
         - a glob pattern (``"run3/cam_left_*.tif"``, ``**`` allowed), natural order:
           ``frame2`` comes before ``frame10``;
         - a single file: a multi-page TIFF (one frame per page) or one image;
+        - a camera recording: Phantom ``.cine``, Photron ``.mraw`` (or its ``.cih`` /
+          ``.cihx`` header), or a video (``.avi``, ``.mp4``, ``.mov``, ``.mkv``, ...)
+          decoded frame-accurately (see ``docs/formats.md``);
         - a list of files, kept in the order given (multi-page TIFFs contribute all
           their pages).
     as_gray : bool, optional
@@ -662,8 +832,19 @@ def read_sequence(source, *, as_gray=False, memmap=True):
         weights (0.299 R + 0.587 G + 0.114 B, rounded, dtype kept). Default False:
         colour frames raise a ValueError.
     memmap : bool, optional
-        Memory-map uncompressed multi-page TIFFs (default True). False reads each
-        frame with a plain file read instead.
+        Memory-map uncompressed multi-page TIFFs, ``.cine`` and ``.mraw`` files (default
+        True). False reads each frame with a plain file read instead.
+    values : {"linear", "raw"}, optional
+        Phantom packed 10-bit (P10) files only: "linear" (default) returns the 12-bit
+        linear intensities through Vision Research's 10-to-12-bit table, "raw" the stored
+        10-bit codes.
+    strays : {"warn", "skip", "keep", "error"}, optional
+        What to do with files whose names do not fit the sequence's numbering (a
+        ``frame_0030 copy.tif`` among ``frame_0000.tif ...``): "warn" (default) keeps
+        them in order and warns with :class:`SequenceWarning`, "skip" leaves them out
+        (logged), "keep" keeps them silently, "error" raises. A regular numbering with
+        missing numbers (a dropped frame) is warned about when at least
+        :data:`GAP_WARNING_MIN_FILES` files follow it, unless ``strays="keep"``.
 
     Returns
     -------
@@ -677,7 +858,13 @@ def read_sequence(source, *, as_gray=False, memmap=True):
     ValueError
         A file is unreadable, truncated or corrupt; a frame's size or bit depth differs
         from the first frame's (the message names the first offending file and both
-        shapes); frames are in colour and ``as_gray`` is False.
+        shapes); frames are in colour and ``as_gray`` is False; frames hold signed
+        integers; a file changed on disk after opening (on reading that frame).
+
+    Warns
+    -----
+    SequenceWarning
+        Stray files or numbering gaps (see ``strays``).
 
     Notes
     -----
@@ -700,8 +887,55 @@ def read_sequence(source, *, as_gray=False, memmap=True):
     >>> int(seq[-1][0, 0]), seq[::2].shape
     (1449, (2, 23, 21))
     """
+    if strays not in ("warn", "skip", "keep", "error"):
+        raise ValueError(f"strays must be 'warn', 'skip', 'keep' or 'error', got {strays!r}")
+    from .formats import is_container, open_store
+
+    if isinstance(source, (str, os.PathLike)) and Path(os.fspath(source)).expanduser().is_file() \
+            and is_container(source):
+        store = open_store(Path(os.fspath(source)).expanduser(), as_gray=as_gray, memmap=memmap, values=values)
+        logger.debug("opened %d frames of %s %s from %s", len(store.file_of), store.shape, store.dtype, store.description)
+        return Sequence(store, np.arange(len(store.file_of)))
     paths, description = _resolve_source(source)
+    containers = [p for p in paths if is_container(p)]
+    if containers and len(paths) > 1:
+        raise ValueError(
+            f"{containers[0]} is a camera recording or video; open it on its own with "
+            f"read_sequence({str(containers[0])!r}), not as part of a list of files"
+        )
+    if containers:
+        return read_sequence(paths[0], as_gray=as_gray, memmap=memmap, values=values, strays=strays)
+    if strays != "keep":
+        _numbers, stray_paths, gaps = parse_numbering(paths)
+        if stray_paths:
+            names = ", ".join(repr(p.name) for p in stray_paths[:5]) + (" ..." if len(stray_paths) > 5 else "")
+            if strays == "error":
+                raise ValueError(
+                    f"{len(stray_paths)} file(s) in {description} do not fit the sequence's numbering: "
+                    f"{names}; remove them or pass strays='skip'"
+                )
+            if strays == "skip":
+                logger.info("left out %d stray file(s) of %s: %s", len(stray_paths), description, names)
+                skip = set(stray_paths)
+                paths = [p for p in paths if p not in skip]
+            else:
+                warnings.warn(
+                    f"{len(stray_paths)} file(s) in {description} do not fit the sequence's numbering "
+                    f"and were sorted in among the frames: {names}; remove them, or pass "
+                    f"strays='skip' to leave them out",
+                    SequenceWarning,
+                    stacklevel=2,
+                )
     store = _FrameStore(paths, as_gray=as_gray, memmap=memmap, description=description)
+    n_numbered = len(store.paths) - len(store.strays)
+    if strays != "keep" and store.gaps and n_numbered >= GAP_WARNING_MIN_FILES:
+        shown = ", ".join(str(g) for g in store.gaps[:8]) + (" ..." if len(store.gaps) > 8 else "")
+        warnings.warn(
+            f"{description}: {len(store.gaps)} number(s) missing from the file numbering ({shown}); "
+            f"a frame may have been dropped: check the export, or run wingphoto.check_sequence",
+            SequenceWarning,
+            stacklevel=2,
+        )
     logger.debug("opened %d frames of %s %s from %s", len(store.file_of), store.shape, store.dtype, description)
     return Sequence(store, np.arange(len(store.file_of)))
 
