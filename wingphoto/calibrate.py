@@ -97,7 +97,27 @@ def _check_square_size(square_size):
         raise ValueError(
             f"square_size must be the positive side of a square in mm (or (dX, dY)), got {square_size!r}"
         )
+    if np.any(sq < 1e-3) or np.any(sq > 1e5):  # 1 um .. 100 m: outside it is a unit mistake
+        raise ValueError(
+            f"square_size {square_size!r} mm is outside 0.001..100000 mm; give the side of one board square "
+            "in mm (e.g. 30)"
+        )
     return float(sq[0]), float(sq[1])
+
+
+def _check_window(window, shape=None):
+    """The corner refinement half-window: an integer >= 0 that fits in the image."""
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)):
+        if not (isinstance(window, (float, np.floating)) and float(window).is_integer()):
+            raise ValueError(f"window must be a whole number of pixels >= 0 (0 skips the refinement), got {window!r}")
+    window = int(window)
+    limit = None if shape is None else max(0, (min(shape[:2]) - 1) // 4)
+    if window < 0 or (limit is not None and window > limit):
+        raise ValueError(
+            f"window must be a half-size in pixels between 0 and {limit if limit is not None else 'a quarter of the image'}"
+            f" (default 7, the toolbox's wintx), got {window}"
+        )
+    return window
 
 
 def _index_range(sel, n, name):
@@ -368,9 +388,11 @@ def find_corners(image, pattern_size, *, rows=None, cols=None, window=7, method=
     ncols, nrows = _check_pattern_size(pattern_size)
     if method not in ("auto", "classic", "sb"):
         raise ValueError(f"method must be 'auto', 'classic' or 'sb', got {method!r}")
+    window = _check_window(window)
     row_idx = _index_range(rows, nrows, "rows")
     col_idx = _index_range(cols, ncols, "cols")
     gray, fname = _read_gray(image, "image")
+    window = _check_window(window, gray.shape)
     label = name or fname or "image"
     h, w = gray.shape
     size = (w, h)
