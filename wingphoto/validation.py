@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["score_tracks", "CONFIDENT_ERROR_PX"]
+__all__ = ["score_tracks", "point_errors", "summarize_errors", "CONFIDENT_ERROR_PX"]
 
 #: An ok point farther than this from the truth (px) is a confident error.
 CONFIDENT_ERROR_PX = 1.0
@@ -24,12 +24,17 @@ CONFIDENT_ERROR_PX = 1.0
 
 def _truth(seq, camera):
     try:
-        pts = np.asarray(getattr(seq, f"points_{camera}"), dtype=np.float64)
-        vis = np.asarray(getattr(seq, f"visible_{camera}"), dtype=bool)
+        if getattr(seq, "camera", None) == camera and hasattr(seq, "points"):  # one-camera sequence
+            pts, vis = seq.points, seq.visible
+        else:
+            pts, vis = getattr(seq, f"points_{camera}"), getattr(seq, f"visible_{camera}")
+        pts = np.asarray(pts, dtype=np.float64)
+        vis = np.asarray(vis, dtype=bool)
     except AttributeError:
         raise ValueError(
             f"seq must have points_{camera} (T, N, 2) and visible_{camera} (T, N) arrays "
-            f"(a synth.StereoSequence), got {type(seq).__name__}"
+            f"(a synth.StereoSequence), or be a one-camera sequence with camera == {camera!r}, "
+            f"points and visible (synth.realdots), got {type(seq).__name__}"
         ) from None
     if pts.ndim != 3 or pts.shape[2] != 2 or vis.shape != pts.shape[:2]:
         raise ValueError(
@@ -142,6 +147,21 @@ def score_tracks(tracks, seq, camera, *, points=None):
     >>> s["ok_share"], s["rms_px"], s["confident_errors"]
     (1.0, 0.0, 0)
     """
+    a = point_errors(tracks, seq, camera, points=points)
+    return summarize_errors(a["error"], a["ok"], a["visible"], a["sigma"])
+
+def point_errors(tracks, seq, camera, *, points=None):
+    """Per point-frame arrays behind :func:`score_tracks` (to pool several sequences).
+
+    Parameters are those of :func:`score_tracks`.
+
+    Returns
+    -------
+    dict of (T, N) ndarray
+        ``error`` (radial distance to the truth, px; NaN where the track has no
+        position), ``ok`` (status ok with a position, restricted to ``points``),
+        ``visible`` (restricted to ``points``) and ``sigma`` (px, NaN where absent).
+    """
     truth, vis = _truth(seq, camera)
     x, y, sigma, ok = _grid(tracks, camera, vis.shape)
     if points is not None:
@@ -153,7 +173,27 @@ def score_tracks(tracks, seq, camera, *, points=None):
         vis = vis & keep
         ok = ok & keep
     err = np.hypot(x - truth[..., 0], y - truth[..., 1])
-    e = err[ok]
+    return {"error": err, "ok": ok, "visible": vis, "sigma": sigma}
+
+
+def summarize_errors(error, ok, visible, sigma):
+    """The numbers of :func:`score_tracks` from (pooled) :func:`point_errors` arrays.
+
+    Parameters
+    ----------
+    error, ok, visible, sigma : ndarray
+        Same-shaped arrays (any shape, e.g. several sequences' arrays raveled and
+        concatenated).
+
+    Returns
+    -------
+    dict
+        The keys of :func:`score_tracks`.
+    """
+    error, ok, vis, sigma = (np.asarray(a) for a in (error, ok, visible, sigma))
+    ok = ok.astype(bool)
+    vis = vis.astype(bool)
+    e = error[ok]
     n_visible = int(vis.sum())
     n_ok_visible = int((ok & vis).sum())
     nan = float("nan")
