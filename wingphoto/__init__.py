@@ -68,3 +68,4 @@ from .track import (
 )
 from .video import write_tracking_video
 from .pipeline import calibrate_folders, load_picks, run_demo, track_folder, track_stereo, triangulate_files
+from .batch import load_manifest, run_batch

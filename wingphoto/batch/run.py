@@ -286,7 +286,8 @@ def _distributed(plan, cache_dir, bar, client):
     return results
 
 
-def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cache=None, cluster_options=None):
+def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cache=None, cluster_options=None,
+              notify=None):
     """Run every trial of a manifest and write the batch tables.
 
     Parameters
@@ -316,6 +317,9 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
         Extra keyword arguments of ``dask.distributed.LocalCluster`` (e.g.
         ``{"processes": False}`` for threads in this process, ``{"dashboard_address":
         ":8787"}``).
+    notify : callable, optional
+        Called with one line of text for a person when the engine starts (the engine, and
+        the Dask dashboard address when one runs); default: logged at INFO level.
 
     Returns
     -------
@@ -367,11 +371,19 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
         log.info("%d trial(s) already finished: %s", len(skipped), ", ".join(skipped))
 
     engine, dashboard, results = "sequential", None, {}
+
+    def say(engine, dashboard):
+        line = f"{len(plan)} of {len(m.trials)} trial(s) to run ({engine})"
+        if dashboard:
+            line += f"; Dask dashboard: {dashboard}"
+        (notify or log.info)(line)
+
     bar = tqdm(total=len(m.trials), initial=len(skipped), desc="trials", unit="trial", disable=not progress)
     try:
         if not plan:
             pass
         elif scheduler is None and (workers == 1 or (workers is None and (os.cpu_count() or 1) == 1)):
+            say(engine, None)
             results = _sequential(plan, cache_dir, bar)
         else:
             from dask.distributed import Client, LocalCluster
@@ -380,8 +392,7 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
                 with Client(scheduler) as client:
                     engine = f"scheduler {scheduler}"
                     dashboard = _dashboard(client)
-                    if dashboard:
-                        log.warning("Dask dashboard: %s", dashboard)
+                    say(engine, dashboard)
                     results = _distributed(plan, cache_dir, bar, client)
             else:
                 n = int(workers) if workers is not None else max(1, min(os.cpu_count() or 1, 2 * len(plan)))
@@ -390,8 +401,7 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
                 with LocalCluster(**options) as cluster, Client(cluster) as client:
                     engine = f"local cluster ({n} workers)"
                     dashboard = _dashboard(client)
-                    if dashboard:
-                        log.warning("Dask dashboard: %s", dashboard)
+                    say(engine, dashboard)
                     results = _distributed(plan, cache_dir, bar, client)
     finally:
         bar.close()

@@ -21,6 +21,7 @@ COMMANDS = (
     "calibrate",
     "track",
     "triangulate",
+    "batch",
     "demo",
 )
 
