@@ -385,15 +385,18 @@ def test_compiled_and_numpy_paths_agree(monkeypatch):
     """With numba the tracker runs compiled kernels; without it (or WINGPHOTO_NO_NUMBA=1)
     the numpy/OpenCV code: same statuses, same positions (OpenCV correlates the template
     rounded to uint8, hence scores within 0.01)."""
-    import wingphoto.track as track
+    from wingphoto.track import engine
 
-    if track._numba is None:
+    if not engine.NUMBA_AVAILABLE:
         pytest.skip("numba not installed: only the numpy path runs")
     frames, truth, _ = moving_discs(17, T=30)
     frames[12:16, 98:110, 104:110] = 150  # a bright patch next to marker 5: flags
     fast = track_markers(frames, np.rint(truth[0]), progress=False)
-    monkeypatch.setattr(track, "_numba", None)
-    slow = track_markers(frames, np.rint(truth[0]), progress=False)
+    try:
+        engine.try_numba(False)
+        slow = track_markers(frames, np.rint(truth[0]), progress=False)
+    finally:
+        engine.try_numba(True)
     assert (fast.status == slow.status).all() and (fast.reason == slow.reason).all()
     assert (fast.status != "ok").any()
     assert np.allclose(fast.x, slow.x, atol=1e-6, equal_nan=True)

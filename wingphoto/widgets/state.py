@@ -726,9 +726,9 @@ def apply_corrections(tracks, corrections):
 
 
 def _track_corrections():
-    from .. import track
+    from .. import corrections
 
-    return track
+    return corrections
 
 
 def _merge_camera_tracks(tracks, camera, new):

@@ -1,0 +1,139 @@
+"""Nearest neighbours and robust affine maps between marker constellations."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import engine
+from .engine import jit
+
+
+@jit
+def _nearest_kernel(px, py, valid, j, d):
+    """Compiled twin of :func:`_nearest_two` (indices and distances of the two nearest)."""
+    n = px.shape[0]
+    for i in range(n):
+        b0 = b1 = np.inf
+        k0 = k1 = -1
+        if valid[i] and not (np.isnan(px[i]) or np.isnan(py[i])):
+            for q in range(n):
+                if q == i or not valid[q] or np.isnan(px[q]) or np.isnan(py[q]):
+                    continue
+                dx = px[i] - px[q]
+                dy = py[i] - py[q]
+                e = dx * dx + dy * dy
+                if e < b0:
+                    b1, k1 = b0, k0
+                    b0, k0 = e, q
+                elif e < b1:
+                    b1, k1 = e, q
+        j[i, 0] = k0
+        j[i, 1] = k1
+        d[i, 0] = np.sqrt(b0)
+        d[i, 1] = np.sqrt(b1)
+
+
+
+
+def _nearest_two(px, py, valid):
+    """Indices of the two nearest other valid points (-1 for none) and their distances."""
+    n = len(px)
+    if n < 2:
+        return np.full((n, 2), -1), np.full((n, 2), np.inf), None
+    if engine.use_numba():
+        j = np.empty((n, 2), np.int64)
+        d = np.empty((n, 2))
+        _nearest_kernel(np.asarray(px, np.float64), np.asarray(py, np.float64), np.asarray(valid, np.bool_), j, d)
+        return j, d, None
+    ok = valid & np.isfinite(px) & np.isfinite(py)
+    x = np.where(ok, px, 0.0)
+    y = np.where(ok, py, 0.0)
+    dx = x[:, None] - x
+    dy = y[:, None] - y
+    d2 = dx * dx + dy * dy
+    bad = ~(ok[:, None] & ok)
+    bad.flat[:: n + 1] = True
+    d2[bad] = np.inf
+    ar = np.arange(n)
+    j0 = d2.argmin(1)
+    d0 = d2[ar, j0]
+    saved = d0.copy()
+    d2[ar, j0] = np.inf
+    j1 = d2.argmin(1)
+    d1 = d2[ar, j1]
+    d2[ar, j0] = saved
+    j = np.column_stack([np.where(np.isfinite(d0), j0, -1), np.where(np.isfinite(d1), j1, -1)])
+    return j, np.sqrt(np.column_stack([d0, d1])), d2
+
+
+def _fit_affine(src, dst):
+    """Least-squares 2D affine (or translation with < 3 points) mapping src -> dst."""
+    n = len(src)
+    if n == 0:
+        return None
+    if n < 3:
+        t = np.mean(dst - src, axis=0)
+        return np.array([[1.0, 0.0, t[0]], [0.0, 1.0, t[1]]])
+    A = np.column_stack([src, np.ones(n)])
+    M, _, rank, _ = np.linalg.lstsq(A, dst, rcond=None)
+    if rank < 3:
+        t = np.mean(dst - src, axis=0)
+        return np.array([[1.0, 0.0, t[0]], [0.0, 1.0, t[1]]])
+    return M.T
+
+
+def _apply_affine(M, p):
+    return p @ M[:, :2].T + M[:, 2]
+
+
+def _robust_affine(src, dst, iters=3, tol=2.0, quality=False):
+    """Affine src -> dst with outlier rejection; optionally also the inliers' RMS residual."""
+    keep = np.ones(len(src), bool)
+    M = None
+    for _ in range(iters):
+        if keep.sum() == 0:
+            break
+        M = _fit_affine(src[keep], dst[keep])
+        res = np.linalg.norm(_apply_affine(M, src) - dst, axis=1)
+        new = res < max(tol, 3.0 * np.median(res[keep]) if keep.any() else tol)
+        if new.sum() < min(3, len(src)) or np.array_equal(new, keep):
+            break
+        keep = new
+    if not quality:
+        return M
+    if M is None:
+        return None, np.inf, 0
+    res = np.linalg.norm(_apply_affine(M, src[keep]) - dst[keep], axis=1)
+    rms = float(np.sqrt(np.mean(res**2))) if keep.sum() > 3 else (0.0 if keep.sum() == 3 else np.inf)
+    return M, rms, int(keep.sum())
+
+
+def _neighbour_prediction(p0, prev, now, min_m=2):
+    """Where a marker at ``p0`` moved to, from neighbours that moved from ``prev`` to ``now``.
+
+    ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
+    A robust affine map when four or more of them agree with one (RMS <= 1.5 px), else
+    the mean displacement of the largest group that moved alike (within 2 px + 10 %: all
+    of them when there are two or three, at least three otherwise; a single neighbour's
+    displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
+    (px), or None when the neighbours do not move together.
+    """
+    m = len(prev)
+    if m >= 4:
+        M, rms, nin = _robust_affine(prev, now, quality=True)
+        if M is not None and nin >= 4 and rms <= 1.5:
+            return _apply_affine(M, p0[None, :])[0], 2.5
+    if m < max(min_m, 1):
+        return None
+    D = now - prev
+    tol = 2.0 + 0.1 * np.hypot(D[:, 0], D[:, 1])
+    dd = np.hypot(D[:, None, 0] - D[None, :, 0], D[:, None, 1] - D[None, :, 1])
+    alike = dd <= tol[:, None]
+    j = int(np.argmax(alike.sum(1)))
+    if alike[j].sum() < min(3, m):
+        return None
+    dm = D[alike[j]].mean(0)
+    return p0 + dm, 2.0 + 0.1 * math.hypot(*dm)
+
+

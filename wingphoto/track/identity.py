@@ -1,0 +1,296 @@
+"""Identity: conflicts, neighbour consensus, vouching and consistency checks."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .geometry import _nearest_two, _neighbour_prediction
+from . import engine
+from .match import _analyse_maps, _climb_kernel
+from .options import _BRIDGE, _MERGE_VALLEY
+from .status import _R, FLAGGED, OK
+
+
+class IdentityStage:
+    """Identity checks of :class:`~wingphoto.track.tracker.Tracker`."""
+
+    def _touching(self, XP, YP, prx, pry, gap, inside, info):
+        """Markers whose blob touches another's on this frame (flag 'merged').
+
+        Positions are the pixel-level matches, or for a marker without one its prediction
+        if it was tracked on the previous frame (a coasting marker's prediction may have
+        drifted onto a neighbour: it does not make that neighbour 'merged'). Two blobs
+        touch when closer than the sum of their radii + 1 px, unless the image between
+        them falls below ``_MERGE_VALLEY`` of the peak (a visible gap), and whenever it
+        stays above ``_BRIDGE`` of the peak (a bright bridge).
+        """
+        px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
+        py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
+        # the two nearest by prediction are the candidates (the nearest by match is one)
+        j = np.maximum(self._j2, 0)
+        d = np.hypot(px[j] - px[:, None], py[j] - py[:, None])
+        d[self._j2 < 0] = np.inf
+        touch = (d < self.rb[:, None] + self.rb[j] + 1.0).any(1)
+        # (and whatever the radii, a bright bridge to the neighbour is a merge)
+        return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
+
+    def _vouch(self, jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t):
+        """Neighbour checks after the status rules.
+
+        A 'jump' from the motion model that the neighbours made too (the whole wing, or
+        the rigid target between two stills, stopped or turned at once) is none: the
+        neighbours are the ok markers, and the other jumpers too when the jump is too
+        short to have landed on another marker's blob (< 40 % of the spacing); a lone
+        marker (nothing to compare with) is vouched for by a short jump (< 30 % of the
+        spacing) to a strong, unambiguous match. Then a marker resuming after a gap, or
+        restarting, must have moved like its neighbours since it was last ok (without
+        neighbours to vouch for it: only close to its own prediction)."""
+        p = self.p
+        if jmp.size:
+            short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
+            ST[short] = OK
+            bad_j, fine = self._inconsistent(jmp, X, Y, ST, res, t, both=True, min_m=1)
+            ST[short] = FLAGGED
+            lone = np.setdiff1d(jmp, np.concatenate([bad_j, fine]))
+            lone = lone[(resid[lone] < 0.3 * self._spacing[lone]) & (S[lone] >= 0.9)
+                        & (SEC[lone] < S[lone] - p.ambiguity_margin)]
+            fine = np.concatenate([fine, lone]).astype(np.int64)
+            ST[fine] = OK
+            RS[fine] = 0
+            chk = np.union1d(chk, fine[(np.abs(t - self.last_ok[fine]) > 1) | (self.nh[fine] < 3)])
+        if chk.size:
+            bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
+            unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
+            far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.sigma[unk])]
+            bad = np.concatenate([bad, far]).astype(np.int64)
+            ST[bad] = FLAGGED
+            RS[bad] = _R["jump"]
+
+
+    def _neighbours_then(self, i, ti, Pi, okn, res):
+        """Up to six neighbours of marker ``i``, nearest first: ok now (``okn``) and on frame
+        ``ti``, within ``self.local`` px of its position ``Pi`` then, and - when two or
+        more did - those that moved like it then (not the static mount and reference dots
+        for a wing marker). Returns their indices and positions on frame ``ti``."""
+        T = res.x.shape[0]
+        cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
+        prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
+        d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
+        keep = d <= self.local
+        cand, prev, d = cand[keep], prev[keep], d[keep]
+        t1 = int(self.hist_t[i, 1])
+        if cand.size >= 2 and self.nh[i] >= 2 and t1 != ti:
+            vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
+            tb = ti - (1 if t1 < ti else -1)
+            if 0 <= tb < T:
+                vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
+                same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
+                if same.sum() >= 2:
+                    cand, prev, d = cand[same], prev[same], d[same]
+        o = np.argsort(d)[:6]
+        return cand[o], prev[o]
+
+    def _inconsistent(self, chk, X, Y, ST, res, t, since=None, both=False, min_lim=0.0, min_m=2):
+        """Markers ``chk`` whose displacement since their last ok frame disagrees with that
+        of their neighbours (:meth:`_neighbours_then`).
+
+        The neighbours' displacement over the same interval (:func:`_neighbour_prediction`)
+        predicts where the marker must be; further than its tolerance (at least
+        ``min_lim``) is inconsistent. With ``since`` the interval starts at the marker's
+        last position that fed the motion model instead, and the consistent ones are
+        returned; with ``both``, (inconsistent, consistent). Prevents a marker that
+        coasted, or restarted, from landing on a neighbour's or an unpicked marker's blob
+        that happens to lie near its extrapolated prediction.
+        """
+        okn = np.flatnonzero(ST == OK)
+        T = res.x.shape[0]
+        bad = []
+        good = []
+        for i in chk.tolist():
+            if since is None:
+                ti = int(self.last_ok[i])
+                if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
+                    continue
+                Pi = np.array([res.x[ti, i], res.y[ti, i]])
+            else:  # since the last position that fed the motion model
+                ti = int(self.hist_t[i, 0])
+                if not 0 <= ti < T or ti == t:
+                    continue
+                Pi = self.hist_x[i, 0]
+            cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            if cand.size < min_m:
+                continue
+            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m)
+            if pq is None:
+                continue  # the neighbours do not move together: nothing to compare with
+            q, lim = pq
+            if math.hypot(X[i] - q[0], Y[i] - q[1]) > max(lim, min_lim):
+                bad.append(i)
+            else:
+                good.append(i)
+        if both:
+            return np.array(bad, np.int64), np.array(good, np.int64)
+        if since is not None:
+            return np.array(good, np.int64)
+        return np.array(bad, np.int64)
+
+    def _conflicts(self, sidx, XP, YP, prx, pry, merged, jn):
+        """Markers that lost a blob to another marker this frame (boolean, all markers).
+
+        Only a searched marker can land on another's blob (a fast-path marker stays within
+        a pixel of its own prediction), so searched markers are tested against all.
+        """
+        n = len(XP)
+        lose = np.zeros(n, bool)
+        si = sidx[np.isfinite(XP[sidx])]
+        vi = np.flatnonzero(np.isfinite(XP))
+        if si.size == 0 or vi.size < 2:
+            return lose
+        dx = XP[si][:, None] - XP[vi]
+        dy = YP[si][:, None] - YP[vi]
+        rr = np.maximum(np.maximum(self.rb[si][:, None], self.rb[vi]), 2.0)
+        same = (dx * dx + dy * dy) < rr * rr
+        same &= si[:, None] != vi
+        if not same.any():
+            return lose
+        # a marker that coasted has a vaguer prediction: it does not take a blob from one
+        # tracked on the previous frame
+        cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5 + (self._gap - 1))
+        for a, b in zip(*np.nonzero(same)):
+            i, j = si[a], vi[b]
+            if merged[i] and merged[j]:
+                continue  # touching blobs: both flagged 'merged' anyway
+            lose[i if cost[i] > cost[j] else j] = True
+        return lose
+
+
+    def _search(self, frame, idx, pred, px, py, r, wide, j2, XP, YP, S, SEC):
+        """Windowed NCC around the predictions of markers ``idx``; wide-search consensus.
+
+        With numba, a marker whose window is small (radius <= 3: moving predictably) is
+        hill-climbed from its prediction instead (a window that small has no room for a
+        runner-up peak away from the best, so nothing is lost); one whose climb reaches
+        the window's edge gets the full search, twice as wide."""
+        p = self.p
+        if engine.use_numba():
+            small = (r[idx] <= 3) & ~wide[idx]
+            if small.any():
+                cidx = idx[small]
+                out = np.empty((cidx.size, 4))
+                _climb_kernel(frame, self.tz, cidx, self.h[cidx], px[cidx].astype(np.int64),
+                              py[cidx].astype(np.int64), r[cidx], out)
+                rim = out[:, 3] > 0
+                ok = ~rim & (out[:, 2] > -2.0)
+                XP[cidx[ok]], YP[cidx[ok]], S[cidx[ok]], SEC[cidx[ok]] = out[ok, 0], out[ok, 1], out[ok, 2], -2.0
+                idx = np.concatenate([idx[~small], cidx[~ok]])
+                if cidx[~ok].size:
+                    r = r.copy()
+                    r[cidx[~ok]] = np.minimum(2 * r[cidx[~ok]] + 2, p.search_radius)
+                if not idx.size:
+                    return
+        ci = np.column_stack([px[idx], py[idx]]).astype(np.int64)
+        ri = r[idx]
+        maps, origin, shp = self._match(frame, idx, ci, ri)
+        others = []
+        for k in range(2):
+            jj = j2[idx, k]
+            o = pred[np.maximum(jj, 0)] - origin
+            o[jj < 0] = np.nan
+            others.append(o)
+        excl = np.maximum(2.0, self.rb[idx])
+        u, v, score, second, border = _analyse_maps(maps, shp, excl, others)
+        # a best peak on the rim of an unclipped window: the marker is further than the
+        # window reaches -> search once more, twice as wide
+        full = (shp[:, 0] == 2 * ri + 1) & (shp[:, 1] == 2 * ri + 1)
+        redo = np.flatnonzero(border & full & (ri < p.search_radius))
+        if redo.size:
+            r2 = np.minimum(2 * ri[redo] + 2, p.search_radius)
+            m2, o2, s2 = self._match(frame, idx[redo], ci[redo], r2)
+            oth2 = [o[redo] + (origin[redo] - o2) for o in others]
+            a = _analyse_maps(m2, s2, excl[redo], oth2)
+            u[redo], v[redo], score[redo], second[redo] = a[0], a[1], a[2], a[3]
+            origin[redo] = o2
+        mx = (origin[:, 0] + u).astype(np.float64)
+        my = (origin[:, 1] + v).astype(np.float64)
+        wsel = wide[idx]
+        if wsel.any():
+            self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl)
+        XP[idx] = mx
+        YP[idx] = my
+        S[idx] = score
+        SEC[idx] = second
+
+
+    def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
+        """Check wide-search matches (no velocity yet) against the wing's local motion.
+
+        Each wide-searched marker's displacement from the reference frame is predicted from
+        its nearest anchors (up to six, within ``self.local`` px in the reference frame):
+        the other markers with a motion model (at their predictions) and the wide-searched
+        markers whose match is unambiguous (:func:`_neighbour_prediction`: a robust affine
+        map, or the mean displacement of a group that moved alike), so that static mount
+        and reference dots next to the wing, or a look-alike, do not decide. An ambiguous
+        (or low-score) match is replaced by a search of radius 4 at the prediction; an
+        unambiguous match that disagrees with the prediction is made ambiguous (flagged,
+        not trusted), never moved. Without such a group the match
+        stands as it is. Prevents a marker starting (or restarting) on its neighbour's or
+        an unpicked marker's blob when its own is dim or the two look alike.
+        """
+        p = self.p
+        n = len(self.h)
+        ref = self.ref_pos
+        ax = np.full(n, np.nan)
+        ay = np.full(n, np.nan)
+        tracked = (self.nh >= 2) & ~self.lostflag
+        ax[tracked], ay[tracked] = pred[tracked, 0], pred[tracked, 1]
+        amb = (second >= score - p.ambiguity_margin) | (score < p.min_score)
+        good = wsel & ~amb
+        ax[idx[good]], ay[idx[good]] = mx[good], my[good]
+        anchors = np.flatnonzero(np.isfinite(ax))
+        redo, qs = [], []
+        for k in np.flatnonzero(wsel).tolist():
+            i = idx[k]
+            cand = anchors[anchors != i]
+            d = np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1])
+            cand, d = cand[d <= self.local], d[d <= self.local]
+            if cand.size < 2:
+                continue
+            near = cand[np.argsort(d)[:6]]
+            pq = _neighbour_prediction(ref[i], ref[near], np.column_stack([ax[near], ay[near]]))
+            if pq is None:
+                continue  # the neighbours do not move together: no prediction to trust
+            q, lim = pq
+            if good[k]:
+                if math.hypot(mx[k] - q[0], my[k] - q[1]) > lim + 1.0:
+                    second[k] = score[k]  # match and neighbours disagree: ambiguous
+                continue
+            redo.append(k)
+            qs.append(q)
+        if not redo:
+            return
+        redo = np.array(redo)
+        q = np.array(qs)
+        qi = np.rint(q).astype(np.int64)
+        hb = self.h[idx[redo]]
+        okq = ((qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1)
+               & (qi[:, 1] + hb <= self.H - 1))
+        redo, q, qi = redo[okq], q[okq], qi[okq]
+        if not redo.size:
+            return
+        cur = np.column_stack([ax, ay])
+        cur[idx[redo]] = q
+        j3, _, _ = _nearest_two(cur[:, 0], cur[:, 1], np.isfinite(cur[:, 0]))
+        m3, o3, s3 = self._match(frame, idx[redo], qi, np.full(redo.size, 4))
+        oth3 = []
+        for k in range(2):
+            jj = j3[idx[redo], k]
+            o = cur[np.maximum(jj, 0)] - o3
+            o[jj < 0] = np.nan
+            oth3.append(o)
+        a = _analyse_maps(m3, s3, excl[redo], oth3)
+        mx[redo] = o3[:, 0] + a[0]
+        my[redo] = o3[:, 1] + a[1]
+        score[redo], second[redo] = a[2], a[3]
+        pred[idx[redo]] = q
+

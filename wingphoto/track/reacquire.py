@@ -1,0 +1,212 @@
+"""Re-acquisition of long-lost markers from their neighbours."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
+from .match import _GRID, _analyse_maps
+from .refine import _refine
+from .status import _R, _SOFT, FLAGGED, OK
+
+
+class ReacquireStage:
+    """Re-acquisition of :class:`~wingphoto.track.tracker.Tracker`."""
+
+    def _predict_lost(self, i, okn, X, Y, res, t):
+        """Where lost marker ``i`` should be now, from its neighbours.
+
+        Returns (prediction, search radius, minimum score, neighbours used) or None.
+
+        1. From its last reliable frame: the neighbours reliable then and now (those that
+           moved like it then, when there are enough) map its last position to now
+           (:func:`_neighbour_prediction`: a robust affine map or the mean displacement of
+           a group that moved alike). Short intervals keep this accurate on a bending,
+           pitching wing.
+        2. Else from the reference frame (the first frame of the pass, where every marker
+           is known) by a robust affine map on its nearest reliable neighbours: a planar
+           wing seen from afar moves by an affine map however much time has passed.
+        3. An isolated marker (fewer than two neighbours within ``self.local`` px - the
+           two-marker rigid target, a reference dot) is searched for in a wide window
+           (``search_radius``) at its last position, moved like its one neighbour if it has
+           one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
+        """
+        p = self.p
+        T = res.x.shape[0]
+        ref = self.ref_pos
+        ti = int(self.hist_t[i, 0])
+        Pi = self.hist_x[i, 0]
+        cand = okn[okn != i]
+        if 0 <= ti < T and cand.size:
+            c1, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            if c1.size >= 2:
+                pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
+                if pq is not None:
+                    return pq[0], p.reacquire_radius, p.reacquire_score, c1
+        # 2. from the reference frame
+        cur = np.column_stack([X[okn], Y[okn]])
+        if okn.size >= 4:
+            use = np.ones(okn.size, bool)
+            if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
+                v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
+                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
+                group = still if v < 0.3 else ~still
+                if group.sum() >= 4:
+                    use = group
+            cidx = np.flatnonzero(use)
+            d = np.hypot(ref[okn[cidx], 0] - ref[i, 0], ref[okn[cidx], 1] - ref[i, 1])
+            order = cidx[np.argsort(d)]
+            for k in (6, 5, 4):
+                near = order[:k]
+                if near.size < 4:
+                    break
+                M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
+                if M is not None and nin >= 4 and rms <= 1.5:
+                    return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
+        # 3. an isolated marker
+        nbr = cand[np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1]) <= self.local]
+        if nbr.size >= 2:
+            return None
+        q = Pi.copy()
+        if nbr.size == 1 and 0 <= ti < T and res.status[ti, nbr[0]] == OK:
+            j = nbr[0]
+            q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
+        return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
+
+    def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred):
+        """Search again for long-lost markers where their reliable neighbours put them.
+
+        Each lost marker's position is predicted from its neighbours
+        (:meth:`_predict_lost`). A blob found near the prediction is accepted only if it
+        correlates well and unambiguously, if no other marker (tracked, or lost and
+        predicted the same way) is expected nearer to it, if no uncertain marker is near
+        (it could be that marker's blob), and if its refinement finds no foreign blob.
+        """
+        p = self.p
+        okn = np.flatnonzero(ST == OK)
+        if okn.size < 1:
+            return
+        lost = np.flatnonzero(self.lostflag)
+        # where every marker is expected: its position, else (tracked but without a
+        # position on this frame) its prediction; long-lost ones from the neighbours below
+        est_x = X.copy()
+        est_y = Y.copy()
+        nopos = ~np.isfinite(X) & ~self.lostflag
+        est_x[nopos], est_y[nopos] = pred[nopos, 0], pred[nopos, 1]
+        q = {}
+        for i in lost.tolist():
+            r = self._predict_lost(i, okn, X, Y, res, t)
+            if r is not None:
+                q[i] = r
+                est_x[i], est_y[i] = r[0]
+        valid = np.isfinite(est_x)
+        found = {}
+        for i, (qi, rad, min_sc, nbrs) in q.items():
+            ci = np.rint(qi).astype(np.int64)
+            hh = int(self.h[i])
+            if ci[0] - hh < 0 or ci[1] - hh < 0 or ci[0] + hh > self.W - 1 or ci[1] + hh > self.H - 1:
+                continue
+            maps, origin, shp = self._match(frame, np.array([i]), ci[None, :], [rad])
+            m = maps.shape[1]
+            ex = max(2.0, float(self.rb[i]))
+            g = _GRID[:m]
+            # cells on other markers' current positions cannot be this marker
+            cur_valid = np.flatnonzero(np.isfinite(X))
+            for j in cur_valid.tolist():
+                if j == i:
+                    continue
+                du = X[j] - origin[0, 0]
+                dv = Y[j] - origin[0, 1]
+                if abs(du - m / 2) > m + ex or abs(dv - m / 2) > m + ex:
+                    continue
+                nearj = ((g[None, :] - du) ** 2 + (g[:, None] - dv) ** 2) <= (max(ex, float(self.rb[j])) + 1.0) ** 2
+                maps[0][nearj] = -2.0
+            u, v, score, second, _ = _analyse_maps(maps, shp, np.array([ex]))
+            sc = float(score[0])
+            if not (sc >= min_sc and second[0] < sc - p.ambiguity_margin):
+                continue
+            mx, my = float(origin[0, 0] + u[0]), float(origin[0, 1] + v[0])
+            # joint test: this marker's prediction must be the nearest to the blob
+            dq = math.hypot(mx - qi[0], my - qi[1])
+            others = valid.copy()
+            others[i] = False
+            if others.any():
+                do = np.hypot(est_x[others] - mx, est_y[others] - my).min()
+                dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
+                if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
+                    continue
+            # and no uncertain marker (flagged, or lost) may be near: the blob could be
+            # its own, and a wrong re-acquisition would be confident from then on
+            unsure = others & (ST != OK)
+            block = 2.5 * (self.rb[i] + 1.0) + dq
+            blockers = np.flatnonzero(unsure & (np.hypot(est_x - mx, est_y - my) < block))
+            found[i] = (mx, my, sc, blockers)
+        # a blocker does not block when it is itself re-acquired on another blob and the
+        # two assignments fit the two predictions better than the swap (two lost
+        # neighbours would otherwise block each other for ever), or when it is a marker
+        # flagged for its precision only, matched on another blob
+        accept = []
+        for i, (mx, my, sc, blockers) in found.items():
+            okb = True
+            for j in blockers.tolist():
+                if j in found:
+                    mj = found[j]
+                    apart = math.hypot(mj[0] - mx, mj[1] - my) > self.rb[i] + self.rb[j]
+                    qi, qj = q[i][0], q[j][0]
+                    same = math.hypot(mx - qi[0], my - qi[1]) + math.hypot(mj[0] - qj[0], mj[1] - qj[1])
+                    swap = math.hypot(mj[0] - qi[0], mj[1] - qi[1]) + math.hypot(mx - qj[0], my - qj[1])
+                    if apart and same + 2.0 < swap:
+                        continue
+                elif (ST[j] == FLAGGED and RS[j] in _SOFT and np.isfinite(X[j])
+                      and math.hypot(X[j] - mx, Y[j] - my) > self.rb[i] + self.rb[j]):
+                    continue
+                okb = False
+                break
+            if okb:
+                accept.append(i)
+        for i in accept:
+            mx, my, sc, _ = found[i]
+            nbrs = q[i][3]
+            # the blob must also be where the neighbours put the marker's last ok position
+            # (a long interval: 4 px tolerance, a neighbour's blob is further)
+            Xi, Yi = X[i], Y[i]
+            X[i], Y[i] = mx, my
+            wrong = self._inconsistent(np.array([i]), X, Y, ST, res, t, min_lim=4.0).size > 0
+            X[i], Y[i] = Xi, Yi
+            if wrong:
+                continue
+            nb = None
+            oth = np.flatnonzero(np.isfinite(X))
+            oth = oth[oth != i]
+            if oth.size:
+                dj = np.hypot(X[oth] - mx, Y[oth] - my)
+                k = int(np.argmin(dj))
+                if dj[k] < self.rd[i] + 3.0 + self.rb[oth[k]]:
+                    nb = np.array([[X[oth[k]], Y[oth[k]]]])
+            sel = np.array([i])
+            rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
+                                        rmax=self.rd[sel])
+            if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
+                continue
+            X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
+            ST[i] = FLAGGED
+            RS[i] = _R["reacquired"]
+            est_x[i], est_y[i] = rx[0], ry[0]
+            # restart the motion model with the neighbours' velocity
+            tp = t - direction
+            vel = np.zeros(2)
+            if 0 <= tp < res.x.shape[0] and len(nbrs):
+                both = nbrs[res.status[tp, nbrs] == OK]
+                if both.size:
+                    vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
+            self.hist_x[i] = np.nan
+            self.hist_x[i, 0] = (rx[0], ry[0])
+            self.hist_x[i, 1] = (rx[0] - vel[0], ry[0] - vel[1])
+            self.hist_t[i] = (t, tp, tp - direction)
+            self.nh[i] = 2
+            self.sigma[i] = 1.0
+            self.lostflag[i] = False
+            self.last_ok[i] = t  # checked against the neighbours: the reference from now on
+
+

@@ -1,0 +1,95 @@
+"""Result arrays of a pass and the tidy tracks table."""
+from __future__ import annotations
+
+import numpy as np
+
+from .status import _R, FLAGGED, LOST, OK, REASONS, STATUS
+
+#: pixel-level match and the reason of a flag.
+TRACKER_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status", "x_pix", "y_pix", "reason"]
+
+
+class _Results:
+    """Preallocated (T, N) result arrays of one pass."""
+
+    names = ("x", "y", "score", "xpix", "ypix")
+
+    def __init__(self, T, N):
+        for k in self.names:
+            setattr(self, k, np.full((T, N), np.nan))
+        self.status = np.full((T, N), LOST, np.int8)
+        self.reason = np.zeros((T, N), np.int8)
+
+    def arrays(self, prefix):
+        out = {prefix + k: getattr(self, k) for k in self.names}
+        out[prefix + "status"] = self.status
+        out[prefix + "reason"] = self.reason
+        return out
+
+    def load(self, d, prefix):
+        for k in self.names + ("status", "reason"):
+            getattr(self, k)[...] = d[prefix + k]
+
+
+
+def _tracks_frame(res, ids, camera, frames_idx=None):
+    import pandas as pd
+
+    T, N = res.x.shape
+    fidx = np.arange(T) if frames_idx is None else np.asarray(frames_idx)
+    status_names = np.array(STATUS, dtype=object)
+    reason_names = np.array(REASONS, dtype=object)
+    df = pd.DataFrame(
+        {
+            "camera": np.full(T * N, camera, dtype=object),
+            "frame": np.repeat(fidx.astype(np.int64), N),
+            "point": np.tile(np.asarray(ids, np.int64), T),
+            "x": res.x.ravel(),
+            "y": res.y.ravel(),
+            "score": res.score.ravel(),
+            "status": status_names[res.status.ravel()],
+            "x_pix": res.xpix.ravel(),
+            "y_pix": res.ypix.ravel(),
+            "reason": reason_names[res.reason.ravel()],
+        }
+    )
+    df["camera"] = df["camera"].astype(str)
+    df["status"] = df["status"].astype(str)
+    df["reason"] = df["reason"].astype(str)
+    return df
+
+
+def _merge_backward(fw, bw, tol):
+    """Flag forward/backward disagreement; fill forward losses from anchored backward runs.
+
+    A backward position replaces a forward loss only inside a run of consecutive
+    backward-ok frames that, later in the sequence, agreed with an ok forward position
+    (the run is anchored to a point both passes saw at the same place); an unanchored
+    backward run may have started on the wrong blob.
+    """
+    both = (fw.status == OK) & (bw.status == OK)
+    d = np.hypot(fw.x - bw.x, fw.y - bw.y)
+    agree = both & (d <= tol)
+    dis = both & (d > tol)
+    soft = (_R["lost_track"], _R["out_of_frame"], _R["low_score"], _R["no_signal"], _R["edge"], _R["jump"])
+    fillable = (fw.status != OK) & (bw.status == OK) & np.isin(fw.reason, soft)
+    T, N = fw.x.shape
+    fill = np.zeros_like(fillable)
+    bok = bw.status == OK
+    for i in range(N):
+        anchored = False
+        for t in range(T - 1, -1, -1):  # the backward pass ran from the end
+            if not bok[t, i]:
+                anchored = False
+                continue
+            if agree[t, i]:
+                anchored = True
+            elif fillable[t, i] and anchored:
+                fill[t, i] = True
+    fw.status[dis] = FLAGGED
+    fw.reason[dis] = _R["fb_disagree"]
+    for k in _Results.names:
+        getattr(fw, k)[fill] = getattr(bw, k)[fill]
+    fw.status[fill] = OK
+    fw.reason[fill] = 0
+
