@@ -14,34 +14,58 @@ from .rig import LEVELS, _camera_key, _image_size, _supersample_rays, scene_fram
 
 
 # ====================================================================== checkerboards
-def pan_tilt_schedule(n_tilts=3, n_pans=7, *, tilt_deg=20.0, pan_deg=30.0):
-    """Tilt and pan angles of the pan-tilt unit, tilt-major (raster) order.
+def pan_tilt_schedule(n_tilts=3, n_pans=7, *, tilt_deg=20.0, pan_deg=30.0, order="raster"):
+    """Board angles of the pan-tilt device's poses (:func:`wingphoto.pantilt.pan_tilt_schedule`).
 
     Parameters
     ----------
     n_tilts, n_pans : int
         Number of tilt and pan stops (the thesis: 3 x 7 = 21 poses).
     tilt_deg, pan_deg : float
-        Largest tilt and pan, degrees; the stops are evenly spaced in
-        ``[-tilt_deg, tilt_deg]`` and ``[-pan_deg, pan_deg]`` (0 when a single stop).
+        Largest tilt and pan of the rendered board, degrees; the device's stops, sorted
+        by servo angle, become evenly spaced board angles in ``[-tilt_deg, tilt_deg]`` and
+        ``[-pan_deg, pan_deg]`` (0 when a single stop).
+    order : {"raster", "capture"}, optional
+        ``"raster"`` (default): sorted tilt-major, tilt and pan increasing (the order of
+        ``data-samples/calibration``); ``"capture"``: the device's order (PanTilt.m's
+        serpentine: the pan sweeps forward, back, forward; the neutral step left out).
 
     Returns
     -------
     angles : (n_tilts * n_pans, 2) ndarray
-        Rows ``(tilt, pan)`` in degrees; pose ``k`` has tilt ``k // n_pans``.
+        Rows ``(tilt, pan)`` in degrees; in raster order pose ``k`` has tilt ``k // n_pans``.
+
+    Notes
+    -----
+    The one schedule is :func:`wingphoto.pantilt.pan_tilt_schedule` (PanTilt.m's pulse
+    widths). Its servo angles (pan +-90 deg at 1.3/1.7 ms on the HS-311; tilt +50, 0,
+    -90 deg on the S03N) would turn a board edge-on, so the rendered board takes the
+    stops' ranks, not the servo angles: stop ``i`` of ``n`` is at
+    ``linspace(-max, max, n)[i]``, the highest tilt pulse (2.0 ms, the device's first
+    row) at ``+tilt_deg``.
 
     Examples
     --------
     >>> pan_tilt_schedule(1, 3, pan_deg=10).tolist()
     [[0.0, -10.0], [0.0, 0.0], [0.0, 10.0]]
+    >>> pan_tilt_schedule(3, 2, order="capture").tolist()
+    [[20.0, -30.0], [20.0, 30.0], [0.0, 30.0], [0.0, -30.0], [-20.0, -30.0], [-20.0, 30.0]]
     """
+    from ..pantilt import pan_tilt_schedule as device_schedule
+
     n_tilts, n_pans = int(n_tilts), int(n_pans)
     if n_tilts < 1 or n_pans < 1:
         raise ValueError(f"n_tilts and n_pans must be >= 1, got {n_tilts}, {n_pans}")
+    if order not in ("raster", "capture"):
+        raise ValueError(f"order must be 'raster' or 'capture', got {order!r}")
+    steps = device_schedule(n_tilts, n_pans, neutral_ms=None)
     tilts = np.linspace(-tilt_deg, tilt_deg, n_tilts) if n_tilts > 1 else np.zeros(1)
     pans = np.linspace(-pan_deg, pan_deg, n_pans) if n_pans > 1 else np.zeros(1)
-    T, P = np.meshgrid(tilts, pans, indexing="ij")
-    return np.column_stack([T.ravel(), P.ravel()])
+    ti, pi = steps["tilt_index"].to_numpy(), steps["pan_index"].to_numpy()
+    if order == "raster":
+        k = np.lexsort((pi, ti))
+        ti, pi = ti[k], pi[k]
+    return np.column_stack([tilts[ti], pans[pi]])
 
 
 def _rot_x(deg):

@@ -79,7 +79,7 @@ def write_samples(out_dir, *, n_calibration=21, n_frames=60, phase_deg=-36.0, pr
     """
     import tifffile  # noqa: F401  (fail early with the dependency's own message)
 
-    from .io import atomic_write
+    from ..io import atomic_write
 
     out = Path(out_dir)
     rig = thesis_rig()
