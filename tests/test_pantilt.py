@@ -310,3 +310,38 @@ def test_serial_backend_bad_arguments():
 
 def test_module_constants():
     assert pantilt.PWM_PERIOD_MS == 20.0 and pantilt.PAN_DELAY_MS == 16.0
+
+
+# ------------------------------------------------------------------ through the CLI
+def test_cli_dryrun_prints_and_writes_the_timeline(tmp_path, capsys):
+    from wingphoto.cli import main
+
+    out = tmp_path / "timeline.csv"
+    assert main(["pantilt", "--backend", "dryrun", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "22 steps of 1 s (22 s) on the dryrun backend, camera trigger at the start" in text
+    tl = pd.read_csv(out)
+    sets = tl[tl.event == "set"]
+    np.testing.assert_allclose(sets.pan_duty, pan_tilt_schedule().pan_duty)
+    assert tl.event.iloc[2] == "trigger_high"
+
+
+def test_cli_nidaq_and_serial_with_fake_hardware(monkeypatch, capsys):
+    import sys
+
+    from wingphoto.cli import main
+
+    ni = _FakeNidaqmx()
+    monkeypatch.setitem(sys.modules, "nidaqmx", ni)
+    monkeypatch.setattr(pantilt.time, "sleep", lambda dt: None)
+    assert main(["pantilt", "--backend", "nidaq", "--device", "Dev2", "--trigger-line", "port0/line1",
+                 "--tilts", "1", "--pans", "2", "--hold", "0.01"]) == 0
+    assert ("add", "Dev2/ctr1", 50.0, 0.065, 0.016) in ni.log and ("do", "Dev2/port0/line1") in ni.log
+    ser = _FakeSerialModule()
+    monkeypatch.setitem(sys.modules, "serial", ser)
+    assert main(["pantilt", "--backend", "serial", "--port", "/dev/ttyFAKE", "--protocol", "arduino",
+                 "--tilts", "1", "--pans", "2", "--hold", "0.01", "--no-neutral"]) == 0
+    assert ser.ports[0].port == "/dev/ttyFAKE" and ser.ports[0].lines == ["H", "W 1300 1500", "W 1700 1500"]
+    capsys.readouterr()
+    assert main(["pantilt", "--backend", "serial"]) == 1
+    assert "--backend serial needs --port" in capsys.readouterr().err

@@ -18,6 +18,7 @@ __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: Subcommands in the order ``wingphoto --help`` lists them; each is a module of this package.
 COMMANDS = (
+    "pantilt",
     "calibrate",
     "track",
     "triangulate",
