@@ -256,10 +256,17 @@ class ReferenceStillness:
     rest : (R, 3) ndarray
         Rest positions (mm, left camera frame).
     tol_mm : float
+        The tolerance used (given, or derived from ``scatter_mm``).
     relative_to : str
     valid : bool
         True when every reference stayed within ``tol_mm``; a reference never seen
         cannot be checked and makes the test invalid.
+    scatter_mm : float
+        The references' own noise: the median distance a reference moves between
+        consecutive frames in which it was seen (mm; NaN when no reference was seen in
+        two consecutive frames).
+    tol_derived : bool
+        True when ``tol_mm`` was derived from ``scatter_mm`` (the default).
     """
 
     table: pd.DataFrame
@@ -270,10 +277,14 @@ class ReferenceStillness:
     tol_mm: float
     relative_to: str
     valid: bool
+    scatter_mm: float = float("nan")
+    tol_derived: bool = False
 
     def summary(self):
         """One line per reference and the verdict, as text."""
-        lines = [f"reference stillness (tolerance {self.tol_mm:g} mm, from the {self.relative_to} position)"]
+        how = (f" = {STILLNESS_NOISE_FACTOR:g} x the references' frame-to-frame scatter {self.scatter_mm:.2g} mm"
+               if self.tol_derived else "")
+        lines = [f"reference stillness (tolerance {self.tol_mm:.3g} mm{how}, from the {self.relative_to} position)"]
         for r in self.table.itertuples(index=False):
             lines.append(
                 f"  point {r.point}: max {r.max_displacement:.3f} mm, rms {r.rms_displacement:.3f} mm "
@@ -283,7 +294,20 @@ class ReferenceStillness:
         return "\n".join(lines)
 
 
-def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean", min_frames=None):
+#: Default stillness tolerance, in units of the references' median frame-to-frame step.
+STILLNESS_NOISE_FACTOR = 10.0
+#: Smallest derived tolerance (mm): noiseless (synthetic) references still pass round-off.
+_MIN_DERIVED_TOL_MM = 1e-6
+
+
+def _frame_to_frame_scatter(R, seen):
+    """Median distance (mm) a reference moves between consecutive frames where it was seen."""
+    both = seen[1:] & seen[:-1]
+    steps = np.linalg.norm(np.diff(R, axis=0), axis=2)[both]
+    return float(np.median(steps)) if steps.size else float("nan")
+
+
+def reference_stillness(points, reference_ids, *, tol_mm=None, relative_to="mean", min_frames=None):
     """Check that the static reference points did not move during a test.
 
     Parameters
@@ -292,10 +316,12 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
         3D points in mm.
     reference_ids : sequence of int
         The static reference points (mount dots that must stay still).
-    tol_mm : float
+    tol_mm : float, optional
         Largest displacement allowed; larger means the camera or the mount moved and the
         test is invalid. It must exceed the triangulation noise (a still point's maximum
-        distance from its mean over T frames is ~3-4 times its 3D noise sigma).
+        distance from its mean over T frames is ~3-4 times its 3D noise sigma). Default:
+        derived from the references' own noise, :data:`STILLNESS_NOISE_FACTOR` (10) times
+        their median frame-to-frame step (see Notes).
     relative_to : {"mean", "first"}
         Rest position: the NaN-aware mean position, or the first frame where the point
         was seen.
@@ -309,17 +335,37 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
     -------
     ReferenceStillness
 
+    Notes
+    -----
+    The default tolerance comes from the data, so that it scales with the rig's real
+    triangulation noise: a bump or a slow drift of a camera or the mount changes the
+    references' positions over many frames but hardly their median frame-to-frame step,
+    while noise sets both. With per-axis noise sigma, the median step is ~1-2.2 sigma
+    (noise mostly in depth .. isotropic) and a still reference's largest excursion over
+    thousands of frames ~4-5 sigma, so 10 median steps (~10-20 sigma) does not fail a still
+    recording, and anything moving the references by more than that fails it. A fixed
+    0.5 mm let a camera bumped by one pixel (0.19 mm on the sample rig) pass.
+
     Examples
     --------
     >>> P = np.zeros((4, 1, 3)); P[:, 0, 2] = [600.0, 600.1, 599.9, 600.0]
     >>> reference_stillness(P, [0], tol_mm=0.2).valid
     True
+    >>> rng = np.random.default_rng(0)
+    >>> P = 600 + rng.normal(0, 0.01, (60, 2, 3))     # two still references, 0.01 mm noise
+    >>> still = reference_stillness(P, [0, 1])
+    >>> still.valid, round(still.tol_mm, 2)
+    (True, 0.22)
+    >>> P[30:, :, 2] += 0.5                            # the camera is bumped at frame 30
+    >>> reference_stillness(P, [0, 1]).valid
+    False
     """
     if relative_to not in ("mean", "first"):
         raise ValueError(f"relative_to must be 'mean' or 'first', got {relative_to!r}")
-    tol_mm = float(tol_mm)
-    if not tol_mm > 0:
-        raise ValueError(f"tol_mm must be a positive length in mm, got {tol_mm}")
+    if tol_mm is not None:
+        tol_mm = float(tol_mm)
+        if not tol_mm > 0:
+            raise ValueError(f"tol_mm must be a positive length in mm, got {tol_mm}")
     P, frames, ids, _ = _as_array(points)
     ref = np.asarray(reference_ids, dtype=np.int64).reshape(-1)
     if ref.size == 0:
@@ -327,6 +373,13 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
     R = P[:, [_column(ids, r, "reference point") for r in ref]]  # (T, R, 3)
     seen = np.all(np.isfinite(R), axis=2)
     n = seen.sum(axis=0)
+    scatter = _frame_to_frame_scatter(R, seen)
+    derived = tol_mm is None
+    if derived:
+        tol_mm = max(STILLNESS_NOISE_FACTOR * scatter, _MIN_DERIVED_TOL_MM) if np.isfinite(scatter) else float("nan")
+        if not np.isfinite(tol_mm):
+            logger.warning("no reference was seen in two consecutive frames: their noise, and so the "
+                           "tolerance, is unknown; the test cannot be validated (or give tol_mm)")
     rest = np.full((len(ref), 3), np.nan)
     for k in range(len(ref)):
         if n[k]:
@@ -359,6 +412,8 @@ def reference_stillness(points, reference_ids, *, tol_mm=0.5, relative_to="mean"
         tol_mm=tol_mm,
         relative_to=relative_to,
         valid=bool(valid.all()),
+        scatter_mm=scatter,
+        tol_derived=derived,
     )
 
 
