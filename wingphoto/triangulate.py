@@ -116,7 +116,8 @@ def reprojection_error(XL, xL, xR, rig):
     return np.column_stack([np.linalg.norm(qL - pL, axis=1), np.linalg.norm(qR - pR, axis=1)])
 
 
-def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manual", "interpolated"), force=False):
+def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manual", "interpolated"), force=False,
+                       calibration=None, point_sigma_px=None):
     """Triangulate two tracks DataFrames into the 3D points DataFrame.
 
     Parameters
@@ -132,6 +133,14 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
     force : bool
         Triangulate even when the result fails the reprojection check (see Raises);
         the failure is then logged as a warning.
+    calibration : StereoCalibration or (rig, uncertainty) or dict, optional
+        With it, each point gets ``sigma_X, sigma_Y, sigma_Z`` (1-sigma, mm) and their
+        tracking-only (``_track``) and calibration-only (``_calib``) parts, propagated to
+        first order from the calibration's covariance and each 2D point's ``sigma``
+        (:func:`wingphoto.uncertainty.add_point_uncertainty`; a toolbox .mat's 3-sigma
+        errors give a diagonal covariance, with a warning).
+    point_sigma_px : float, optional
+        2D sigma (px) assumed where the tracks carry none (default 0.1 px).
 
     Returns
     -------
@@ -173,7 +182,7 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
     err = reprojection_error(XL, xL, xR, rig).max(axis=1) if len(m) else np.zeros(0)
     if len(m):
         _check_reprojection(err, m, tl, tr, rig, ok_status, force)
-    return pd.DataFrame(
+    points = pd.DataFrame(
         {
             "frame": m["frame"].to_numpy(np.int64),
             "point": m["point"].to_numpy(np.int64),
@@ -183,6 +192,11 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
             "reproj_err": err,
         }
     )
+    if calibration is not None:
+        from .uncertainty import add_point_uncertainty
+
+        points = add_point_uncertainty(points, tl, tr, rig, calibration=calibration, point_sigma_px=point_sigma_px)
+    return points
 
 
 # ----------------------------------------------------------------- consistency checks

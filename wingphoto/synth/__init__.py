@@ -53,11 +53,13 @@ from .raster import render_discs
 from .rig import CAMERAS, IMAGE_SIZE, LEVELS, load_rig, rig_from_dict, rig_to_dict, scene_frame, thesis_rig
 from .samples import write_samples
 from .target import render_rigid_target
-from .wing import StereoSequence
+from .wing import StereoSequence, WingMotion, wing_motion
 
 __all__ = [
     "CalibrationSet",
     "StereoSequence",
+    "WingMotion",
+    "wing_motion",
     "thesis_rig",
     "scene_frame",
     "pan_tilt_schedule",

@@ -274,6 +274,8 @@ def render_flapping(
     noise_std=None,
     blur_sigma=None,
     phase_deg=0.0,
+    deviation_deg=0.0,
+    twist_deg=0.0,
     membrane_level=LEVELS["membrane"],
     edge_on_deg=72.0,
     merge_gap_px=1.5,
@@ -319,6 +321,13 @@ def render_flapping(
         Gaussian optics blur, px.
     phase_deg : float, optional
         Wing-beat phase of frame 0 (default 0: the top of the stroke, wing flat).
+    deviation_deg : float, optional
+        Amplitude of the wing's figure-of-eight deviation out of the stroke plane,
+        ``deviation_deg sin(2 th)`` (default 0).
+    twist_deg : float, optional
+        Amplitude of the spanwise twist: the pitch grows linearly along the span by
+        ``twist_deg sin(th)`` from root to tip (default 0). Definitions:
+        ``docs/kinematics.md``; the true values are in ``seq.kinematics``.
     membrane_level : float, optional
         Grey level of the (dim) wing membrane, default 30 on a background of 6; set it
         to ``LEVELS["background"]`` to make the membrane invisible.
@@ -397,7 +406,7 @@ def render_flapping(
     wing = _WingModel(
         hinge=_WING_HINGE, stroke_amplitude_deg=amp, pitch_deg=float(settings["pitch_deg"]),
         camber=float(settings["camber"]), bend_mm=float(settings["bend_mm"]), flap_hz=float(flap_hz),
-        phase_deg=float(phase_deg),
+        phase_deg=float(phase_deg), deviation_deg=float(deviation_deg), twist_deg=float(twist_deg),
     )
     sig_m = np.repeat(_MARKER_SIGMA, len(_MARKER_XI))
     xi_m = np.tile(_MARKER_XI, len(_MARKER_SIGMA))
@@ -454,7 +463,8 @@ def render_flapping(
     stroke, pitch, _, _ = wing.angles(times)
     kinds = np.array(["wing"] * n_wing + ["mount"] * 2 + ["reference"] * 6)
     params = dict(settings, preset=preset, n_frames=n_frames, fps=float(fps), flap_hz=float(flap_hz),
-                  phase_deg=float(phase_deg), membrane_level=float(membrane_level),
+                  phase_deg=float(phase_deg), deviation_deg=float(deviation_deg), twist_deg=float(twist_deg),
+                  membrane_level=float(membrane_level),
                   edge_on_deg=float(edge_on_deg), merge_gap_px=float(merge_gap_px),
                   supersample=int(supersample), dtype=np.dtype(dtype).name, seed=seed,
                   glare=glare_peak, hinge_left_mm=(S + B @ _WING_HINGE).tolist(),
@@ -465,5 +475,5 @@ def render_flapping(
         visible_left=vis["left"], visible_right=vis["right"], kinds=kinds,
         marker_diameter_mm=diam, fps=float(fps), times=times,
         noise_std=float(settings["noise_std"]), blur_sigma=float(settings["blur_sigma"]),
-        stroke_angle_deg=stroke, pitch_angle_deg=pitch, params=params,
+        stroke_angle_deg=stroke, pitch_angle_deg=pitch, params=params, kinematics=wing.kinematics(times),
     )

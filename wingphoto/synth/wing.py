@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 
 from ..camera import StereoRig
-from .board import _rot_x, _rot_z
+from .board import _rot_x, _rot_y, _rot_z
 from .rig import CAMERAS, LEVELS
 
 
@@ -27,6 +27,8 @@ class _WingModel:
     bend_mm: float = 2.0
     flap_hz: float = 30.0
     phase_deg: float = 0.0
+    deviation_deg: float = 0.0  # amplitude of the figure-of-eight deviation out of the stroke plane
+    twist_deg: float = 0.0  # amplitude of the linear spanwise twist (pitch at the tip minus at the root)
 
     def chord(self, sigma):
         sigma = np.clip(sigma, 0.0, 1.0)
@@ -40,6 +42,25 @@ class _WingModel:
         camber = self.camber * np.sin(th)
         bend = self.bend_mm * np.sin(th - np.radians(20.0))
         return stroke, pitch, camber, bend
+
+    def extra_angles(self, t):
+        """Deviation (deg, out of the stroke plane) and spanwise twist (deg, tip minus root) at times t."""
+        th = 2 * np.pi * self.flap_hz * np.asarray(t, dtype=np.float64) + np.radians(self.phase_deg)
+        return self.deviation_deg * np.sin(2.0 * th), self.twist_deg * np.sin(th)
+
+    def kinematics(self, t):
+        """Every prescribed kinematic quantity at times t (a dict of arrays; see docs/kinematics.md).
+
+        ``stroke_deg`` (angle in the stroke plane), ``deviation_deg`` (out of it), ``pitch_deg``
+        (at the root; the pitch at span fraction ``s`` is ``pitch_deg + s * twist_deg``),
+        ``twist_deg`` (tip minus root), ``camber`` (peak camber as a fraction of the local
+        chord, positive towards the wing's normal ``span x chord``) and ``bend_mm`` (tip
+        deflection along that normal).
+        """
+        stroke, pitch, camber, bend = self.angles(t)
+        dev, twist = self.extra_angles(t)
+        return {"stroke_deg": stroke, "deviation_deg": dev, "pitch_deg": pitch, "twist_deg": twist,
+                "camber": camber, "bend_mm": bend}
 
     def surface(self, sigma, xi, t):
         """Scene coordinates of material points (sigma span fraction, xi chord fraction).
@@ -57,7 +78,17 @@ class _WingModel:
             ],
             axis=-1,
         )
-        Rw = _rot_z(np.radians(stroke)) @ _rot_x(pitch)
+        if not (self.deviation_deg or self.twist_deg):
+            Rw = _rot_z(np.radians(stroke)) @ _rot_x(pitch)
+            return local @ Rw.T + self.hinge
+        dev, twist = (float(v) for v in self.extra_angles(t))
+        # pitch (plus the twist, linear along the span) about the span axis, then the
+        # deviation out of the stroke plane, then the stroke about the plane's normal
+        p = np.radians(pitch + twist * sigma)
+        c, s = np.cos(p), np.sin(p)
+        y, z = local[..., 1], local[..., 2]
+        local = np.stack([local[..., 0], c * y - s * z, s * y + c * z], axis=-1)
+        Rw = _rot_z(np.radians(stroke)) @ _rot_y(-dev)
         return local @ Rw.T + self.hinge
 
     def normals(self, sigma, xi, t):
@@ -148,6 +179,9 @@ class StereoSequence:
     stroke_angle_deg, pitch_angle_deg : (T,) ndarray
         True wing stroke and pitch angles (see :func:`render_flapping`); NaN for a
         rigid target.
+    kinematics : dict of (T,) ndarray or None
+        Every true kinematic quantity of a flapping wing (``_WingModel.kinematics``:
+        stroke, deviation, root pitch, twist, camber, bending; ``docs/kinematics.md``).
     params : dict
         Every setting the sequence was rendered with.
 
@@ -179,6 +213,7 @@ class StereoSequence:
     stroke_angle_deg: np.ndarray = None
     pitch_angle_deg: np.ndarray = None
     params: dict = field(default_factory=dict)
+    kinematics: dict = None
 
     def __post_init__(self):
         for name in ("left", "right"):
@@ -309,3 +344,114 @@ class _Scene:
     membrane_level: float = 0.0
     glare: callable = None
     background: float = LEVELS["background"]
+
+
+# ===================================================================== motion only
+@dataclass(frozen=True)
+class WingMotion:
+    """The synthetic wing's motion without images: markers, normals and true kinematics.
+
+    Attributes
+    ----------
+    times : (T,) ndarray
+        Seconds (frame ``k`` at ``k / fps``).
+    points3d, normals : (T, N, 3) ndarray
+        Marker centres (mm) and unit marker normals in the left camera frame of ``rig``,
+        numbered as :func:`render_flapping`'s (0-17 wing, 18-19 mount, 20-25 references).
+    kinds : (N,) ndarray of str
+    kinematics : dict of (T,) ndarray
+        The true kinematics (:meth:`_WingModel.kinematics`).
+    hinge : (3,) ndarray
+        Wing hinge, mm, left camera frame.
+    stroke_normal : (3,) ndarray
+        Normal of the stroke plane (the scene's ``n``), left camera frame.
+    marker_sigma, marker_xi : (18,) ndarray
+        Span and chord fraction of each wing marker.
+    params : dict
+        The wing's settings.
+    """
+
+    times: np.ndarray
+    points3d: np.ndarray = field(repr=False)
+    normals: np.ndarray = field(repr=False)
+    kinds: np.ndarray = field(repr=False)
+    kinematics: dict = field(repr=False)
+    hinge: np.ndarray
+    stroke_normal: np.ndarray
+    marker_sigma: np.ndarray = field(repr=False)
+    marker_xi: np.ndarray = field(repr=False)
+    params: dict = field(default_factory=dict)
+    model: object = field(default=None, repr=False)
+    scene: tuple = field(default=None, repr=False)
+
+    def points(self, *, visible=None):
+        """The motion as a points DataFrame (frame, point, X, Y, Z, reproj_err 0).
+
+        Parameters
+        ----------
+        visible : (T, N) array_like of bool, optional
+            Points not visible get NaN coordinates.
+        """
+        t, n = self.points3d.shape[:2]
+        X = self.points3d.copy()
+        if visible is not None:
+            X[~np.asarray(visible, bool)] = np.nan
+        X = X.reshape(-1, 3)
+        return pd.DataFrame({"frame": np.repeat(np.arange(t, dtype=np.int64), n),
+                             "point": np.tile(np.arange(n, dtype=np.int64), t),
+                             "X": X[:, 0], "Y": X[:, 1], "Z": X[:, 2], "reproj_err": np.zeros(t * n)})
+
+    def surface(self, sigma, xi, frame):
+        """Material points of the wing surface (mm, left camera frame) at a frame."""
+        S, B = self.scene
+        return S + self.model.surface(sigma, xi, float(self.times[frame])) @ B.T
+
+
+def wing_motion(rig=None, *, n_frames=100, fps=3000.0, flap_hz=30.0, preset="clean", phase_deg=0.0,
+                stroke_amplitude_deg=None, pitch_deg=None, camber=None, bend_mm=None, deviation_deg=0.0,
+                twist_deg=0.0):
+    """The motion of :func:`render_flapping`'s wing without rendering any image.
+
+    The same wing, markers, mount and reference dots, placed in ``rig``'s scene exactly
+    as :func:`render_flapping` places them; parameters as there. Used by the
+    experiment planner and by tests of the kinematics (fast: no pixels).
+
+    Returns
+    -------
+    WingMotion
+
+    Examples
+    --------
+    >>> m = wing_motion(n_frames=4, deviation_deg=5.0)
+    >>> m.points3d.shape, sorted(m.kinematics)[:2]
+    ((4, 26, 3), ['bend_mm', 'camber'])
+    """
+    from .flapping import _check_rig, flapping_preset
+    from .rig import scene_frame
+
+    rig = _check_rig(rig)
+    s = flapping_preset(preset)
+    given = dict(stroke_amplitude_deg=stroke_amplitude_deg, pitch_deg=pitch_deg, camber=camber, bend_mm=bend_mm)
+    s.update({k: v for k, v in given.items() if v is not None})
+    S, B = scene_frame(rig)
+    wing = _WingModel(hinge=_WING_HINGE, stroke_amplitude_deg=float(s["stroke_amplitude_deg"]),
+                      pitch_deg=float(s["pitch_deg"]), camber=float(s["camber"]), bend_mm=float(s["bend_mm"]),
+                      flap_hz=float(flap_hz), phase_deg=float(phase_deg), deviation_deg=float(deviation_deg),
+                      twist_deg=float(twist_deg))
+    sig_m = np.repeat(_MARKER_SIGMA, len(_MARKER_XI))
+    xi_m = np.tile(_MARKER_XI, len(_MARKER_SIGMA))
+    fixed = S + np.concatenate([_WING_HINGE + _MOUNT, _reference_layout()]) @ B.T
+    times = np.arange(int(n_frames)) / float(fps)
+    X = np.empty((len(times), len(sig_m) + len(fixed), 3))
+    N = np.empty_like(X)
+    for k, t in enumerate(times):
+        X[k, : len(sig_m)] = S + wing.surface(sig_m, xi_m, t) @ B.T
+        N[k, : len(sig_m)] = wing.normals(sig_m, xi_m, t) @ B.T
+        X[k, len(sig_m):] = fixed
+        N[k, len(sig_m):] = -B[:, 2]
+    kinds = np.array(["wing"] * len(sig_m) + ["mount"] * 2 + ["reference"] * 6)
+    params = dict(s, n_frames=int(n_frames), fps=float(fps), flap_hz=float(flap_hz), phase_deg=float(phase_deg),
+                  deviation_deg=float(deviation_deg), twist_deg=float(twist_deg))
+    return WingMotion(times=times, points3d=X, normals=N, kinds=kinds, kinematics=wing.kinematics(times),
+                      hinge=S + B @ _WING_HINGE, stroke_normal=B[:, 2].copy(), marker_sigma=sig_m, marker_xi=xi_m,
+                      params=params, model=wing, scene=(S, B))
