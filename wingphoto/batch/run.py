@@ -61,7 +61,7 @@ class BatchResult:
     trials : pandas.DataFrame
         ``trials.csv``: the same statistics per finished trial.
     failures : pandas.DataFrame
-        ``failures.csv``: trial, stage, error, log (the trial's log file).
+        ``failures.csv``: trial, stage, error, log (the trial's log file, relative to ``out``).
     done, skipped : tuple of str
         Trials run now, and trials found finished by an earlier run.
     engine : str
@@ -410,7 +410,8 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
     for t, work, final in plan:
         r = results.get(t.id)
         if isinstance(r, TrialError):
-            failures.append({"trial": t.id, "stage": r.stage, "error": r.message, "log": str(work / "log.txt")})
+            failures.append({"trial": t.id, "stage": r.stage, "error": r.message,
+                             "log": (work / "log.txt").relative_to(out).as_posix()})
     failures = pd.DataFrame(failures, columns=list(FAILURE_COLUMNS))
     trials, summary = summarize_batch(m, out)
     _write_csv(summary, out / "summary.csv")
