@@ -101,7 +101,7 @@ def test_edge_pixels_are_inside():
 def test_picks_table_has_nan_for_a_number_missing_in_one_view():
     s = _two_view_state()
     right = s.to_frame("right")
-    assert right.columns.tolist() == ["point", "x", "y", "half_w", "half_h", "half_size"]
+    assert right.columns.tolist() == ["point", "frame", "x", "y", "half_w", "half_h", "half_size"]
     assert right["point"].dtype == np.int64 and right["x"].dtype == np.float64
     assert right["point"].tolist() == [0, 1, 2]
     np.testing.assert_array_equal(right.loc[2, ["x", "y", "half_w", "half_h"]].to_numpy(float), np.full(4, np.nan))
@@ -155,7 +155,7 @@ def test_load_errors_name_the_file(tmp_path):
         PickerState.load(other)
     dup = json.loads(_two_view_state().to_json())
     dup["picks"]["left"].append(dup["picks"]["left"][0])
-    with pytest.raises(ValueError, match="repeat a point number"):
+    with pytest.raises(ValueError, match=r"point\(s\) \[0\] more than once"):
         PickerState.from_json(json.dumps(dup))
 
 
@@ -237,10 +237,14 @@ def test_picker_drag_moves_then_resizes_one_undo_each():
     p.on_drag(21.0, 19.0, 25.0, 22.0)  # grab inside the rectangle: move by the drag
     assert p.state.get("left", 0)[:3] == (0, 24.0, 23.0)
     assert p.state.undo() == before
-    p.on_drag(29.0, 23.0, 31.0, 26.0)  # grab the right edge (x = 24 + 5): resize
-    assert p.state.get("left", 0)[3:] == (7.0, 3.0)
-    p.undo_button.click()
-    p.undo_button.click()
+    p.on_drag(29.0, 23.0, 31.0, 26.0)  # grab the right edge (x = 24 + 5): widen only
+    assert p.state.get("left", 0)[3:5] == (7.0, 5.0)
+    p.on_drag(24.0, 28.0, 25.0, 25.0)  # grab the bottom edge (y = 23 + 5): shorten only
+    assert p.state.get("left", 0)[3:5] == (7.0, 2.0)
+    p.on_drag(31.0, 25.0, 34.0, 28.0)  # the bottom-right corner (31, 25): both
+    assert p.state.get("left", 0)[3:5] == (10.0, 5.0)
+    for _ in range(4):
+        p.undo_button.click()
     assert p.state == before
 
 
@@ -297,6 +301,10 @@ def test_load_or_pick_headless_path(tmp_path, monkeypatch):
     p = Picker.load_or_pick(left, right, picks_path=path)
     assert p.state == _two_view_state()
     monkeypatch.setenv("WINGPHOTO_HEADLESS", "0")
+    # outside a notebook nobody can click: a clear error that says how to make the file
+    with pytest.raises(FileNotFoundError, match=r"no notebook to click in; make it with `wingphoto pick"):
+        Picker.load_or_pick(left, right, picks_path=tmp_path / "new.json", n_points=4)
+    monkeypatch.setattr("wingphoto.widgets.picker._in_kernel", lambda: True)
     fresh = Picker.load_or_pick(left, right, picks_path=tmp_path / "new.json", n_points=4)
     assert fresh.state.n_rows == 4 and fresh.state.numbers("left") == []
     small = np.zeros((2, 30, 30), np.uint8)
@@ -435,7 +443,7 @@ def test_review_next_problem_click_corrects_and_retracks_forward():
     r = TrackReview(_stack(), t, retrack=retrack)
     r.next_problem_button.click()
     assert (r.state.frame, r.state.point, r.state.camera) == (3, 1, "left")
-    assert r.frame_slider.value == 3 and r.problem_list.value == (3, 1)
+    assert r.frame_slider.value == 3 and r.problem_list.value == (3, 1, "left")
     r.on_click(24.0, 21.5)
     assert calls == [((8, H, W), {"left"}, [1], 3)]
     left = r.state.tracks.query("camera == 'left' and point == 1").set_index("frame")
@@ -458,7 +466,7 @@ def test_review_log_replays_to_the_same_tracks(tmp_path):
     r.frame_slider.value = 3
     r.point_box.value = 1
     r.on_click(25.0, 21.0)
-    r.problem_list.value = (5, 2)  # choosing an item of the list goes there
+    r.problem_list.value = (5, 2, "left")  # choosing an item of the list goes there (and to its camera)
     assert (r.state.frame, r.state.point, r.state.camera) == (5, 2, "left")
     r.correct(2, 25.0, 22.0)
     r.save_button.click()
@@ -565,3 +573,141 @@ def test_review_load_or_review_replays_the_saved_log(tmp_path):
     (tmp_path / "bad.json").write_text("[]")
     with pytest.raises(ValueError, match="not a wingphoto corrections file"):
         TrackReview.load_or_review(stack, t, corrections_path=tmp_path / "bad.json")
+
+
+# --------------------------------------------------------------------------- picker, as a person uses it
+def test_click_on_background_never_moves_a_placed_marker():
+    left, right = _frames()
+    p = Picker(left, right, n_points=2, half_size=(3, 3))
+    p.on_click(10.0, 5.0)
+    p.on_click(30.0, 20.0)
+    placed = p.state
+    p.on_click(45.0, 30.0)  # every marker is placed: the click is refused, with a reason
+    assert p.state == placed
+    assert "all 2 markers are placed in the left view" in p.message
+    assert "this click was ignored" in p.status.value
+    p.arm_move()
+    p.on_click(45.0, 30.0)  # after Move, the same click does move the active marker
+    assert p.state.get("left", p.state.current)[1:3] == (45.0, 30.0)
+
+
+def test_two_markers_on_the_same_spot_are_refused():
+    s = PickerState(image_size=(W, H), half_size=(3, 3)).place("left", 10, 5)
+    with pytest.raises(ValueError, match=r"point 0 is already at \(10.0, 5.0\) in the left view"):
+        s.place("left", 10.4, 5.2)
+    s = s.place("left", 20, 5)
+    with pytest.raises(ValueError, match="point 0 is already at"):
+        s.move("left", 1, 10.0, 5.5)
+    assert s.place("right", 10, 5).numbers("right") == [0]  # the same spot in the other view is fine
+
+
+def test_new_boxes_shrink_so_they_do_not_overlap_neighbours():
+    s = PickerState(image_size=(W, H), half_size=(10, 10))
+    s = s.place("left", 10, 10).place("left", 22, 12)  # 12 px apart: halves of 6 do not overlap
+    assert [(p.half_w, p.half_h) for p in s.left] == [(6.0, 6.0), (6.0, 6.0)]
+    s = s.resize("left", 1, 8, 8).place("left", 50, 30)  # a box the user sized is kept
+    assert s.get("left", 1)[3:5] == (8.0, 8.0)
+    assert s.get("left", 2)[3:5] == (10.0, 10.0)  # far from the others: the default
+    s = s.place("left", 12, 11)  # 2 px from point 0: shrunk, but not below MIN_AUTO_HALF
+    assert s.get("left", 3)[3:5] == (3.0, 3.0)
+
+
+def test_coordinate_readout_is_in_image_pixels_when_zoomed():
+    left, right = _frames()
+    p = Picker(left, right, half_size=(3, 3))
+    p.set_zoom(4.0)
+    u, v = p.to_display(12.25, 7.5)
+    assert p.ax.format_coord(u, v) == "left x=12.25 y=7.50 px (zoom 4)"
+
+
+def test_status_line_sits_above_the_figure_and_sliders_send_one_event_per_drag():
+    left, right = _frames()
+    p = Picker(left, right, half_size=(3, 3))
+    children = list(p.widget.children)
+    assert children.index(p.status) < children.index(p._canvas_widget)
+    assert p.box_slider.continuous_update is False and p.zoom_slider.continuous_update is False
+    p.on_click(10.0, 10.0)
+    p.select_point(0)
+    n_undo = len(p.state.history)
+    p.box_slider.value = 7  # one release of the slider = one value = one undo step
+    assert len(p.state.history) == n_undo + 1
+    assert p.state.get("left", 0)[3:5] == (7.0, 7.0)
+    assert p.state.undo().get("left", 0)[3:5] == (3.0, 3.0)
+
+
+def test_numbers_are_written_beside_their_own_centre():
+    left, right = _frames()
+    p = Picker(left, right, half_size=(8, 8))
+    p.on_click(20.0, 20.0)
+    p.on_click(40.0, 20.0)
+    texts = {t.get_text(): t.xy for t in p.ax.texts}
+    assert texts == {"0": (20.0, 20.0), "1": (40.0, 20.0)}  # anchored at the centre, offset a few points
+
+
+def test_static_image_says_how_to_click(monkeypatch):
+    left, right = _frames()
+    p = Picker(left, right)
+    assert p._png is not None  # Agg in tests: the static fallback
+    assert "%matplotlib widget" in p.status.value
+
+
+def test_headless_display_is_a_figure_of_numbered_picks(monkeypatch):
+    from matplotlib.figure import Figure
+
+    left, right = _frames()
+    p = Picker(left, right, state=_two_view_state())
+    fig = p.static_figure()
+    assert isinstance(fig, Figure) and len(fig.axes) == 2
+    for ax, cam, n in zip(fig.axes, ("left", "right"), (3, 2)):
+        assert ax.get_title() == f"{cam} view, frame 0: {n} markers picked"
+        assert sorted(t.get_text() for t in ax.texts) == [str(k) for k in range(n)]
+    shown = []
+    monkeypatch.setattr("IPython.display.display", lambda obj: shown.append(obj))
+    monkeypatch.setenv("WINGPHOTO_HEADLESS", "1")
+    p._ipython_display_()
+    assert isinstance(shown[0], Figure)
+
+
+def test_picks_remember_the_frame_they_were_picked_in(tmp_path):
+    left, right = _frames()
+    p = Picker(left, right, frame=2, half_size=(3, 3))
+    p.on_click(10.0, 10.0)
+    p.set_camera("right")
+    p.on_click(12.0, 10.0)
+    p.save(tmp_path / "p.json")
+    from wingphoto.picks import load_picks
+
+    assert load_picks(tmp_path / "p.json", "right")["frame"].tolist() == [2]
+    p.save(tmp_path / "p.csv")
+    assert PickerState.load(tmp_path / "p.csv").to_table().equals(p.state.to_table())
+
+
+def test_review_lost_point_is_ringed_where_last_seen_and_zoom_centres_there():
+    t = _tracks()
+    lost = (t["camera"] == "left") & (t["point"] == 2) & (t["frame"] >= 4)
+    t.loc[lost, ["x", "y"]] = np.nan
+    t.loc[lost, "status"] = "lost"
+    r = TrackReview(_stack(), t, retrack=False)
+    r.goto(6)
+    r.select_point(2)
+    last = (t.query("camera == 'left' and point == 2 and frame == 3")[["x", "y"]].to_numpy()[0])
+    r.set_zoom(4.0)
+    assert (r.viewport.cx, r.viewport.cy) == pytest.approx(tuple(last))  # not the image middle
+    notes = [a for a in r.ax.texts if a.get_text() == "2 lost: last seen here"]
+    assert len(notes) == 1 and notes[0].xy == pytest.approx(r.to_display(*last))
+
+
+def test_review_problem_list_highlights_only_the_camera_shown():
+    t = _tracks()
+    only_right = (t["camera"] == "right") & (t["frame"] == 2) & (t["point"] == 0)
+    t.loc[only_right, "status"] = "flagged"
+    r = TrackReview(_stack(), t, retrack=False)
+    labels = [label for label, _ in r.problem_list.options]
+    assert any(label.startswith("frame 2, point 0, right: flagged") for label in labels)
+    r.goto(2)
+    r.select_point(0)
+    assert r.state.camera == "left" and r.problem_list.value is None  # a right-view problem
+    r.set_camera("right")
+    assert r.problem_list.value == (2, 0, "right")
+    children = list(r.widget.children)
+    assert children.index(r.status) < len(children) - 1  # status above the figure row

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plot_corners", "plot_residuals", "plot_view_errors", "plot_coverage", "plot_contact_sheet"]
+__all__ = ["plot_corners", "plot_residuals", "plot_view_errors", "plot_coverage", "plot_contact_sheet", "plot_picks"]
 
 
 def _axes(ax):
@@ -272,3 +272,67 @@ def plot_contact_sheet(images, *, titles=None, ncols=7, axes=None, cmap="gray", 
             if titles is not None:
                 ax.set_title(str(titles[k]), fontsize=8)
     return axes.reshape(nrows, -1) if axes.size == nrows * ncols else axes
+
+
+# --- picks ---
+def plot_picks(images, picks, *, frame=0, axes=None, figsize=None):
+    """Show the picked markers, numbered, on every view (the picker's headless figure).
+
+    Parameters
+    ----------
+    images : dict
+        ``{camera: (H, W) image}`` (the frame the markers were picked in).
+    picks : PickerState or pandas.DataFrame
+        The picks: a :class:`~wingphoto.widgets.state.PickerState` or a table with
+        columns camera, point, x, y[, half_w, half_h] (:func:`wingphoto.picks.read_picks`).
+    frame : int
+        Frame number, for the titles.
+    axes : sequence of Axes, optional
+        One per camera; a new figure otherwise.
+    figsize : (w, h), optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel per camera: image, each marker's subimage box, its centre and its number
+        written beside the centre.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    if hasattr(picks, "to_table"):
+        picks = picks.to_table()
+    cameras = [c for c in ("left", "right") if c in images]
+    if not cameras:
+        raise ValueError(f"images must be a dict with 'left' and/or 'right', got keys {list(images)}")
+    if axes is None:
+        fig, axes = plt.subplots(1, len(cameras), figsize=figsize or (5.0 * len(cameras), 5.0), squeeze=False)
+        axes = axes[0]
+    else:
+        axes = list(np.atleast_1d(axes))
+        fig = axes[0].figure
+    for ax, cam in zip(axes, cameras):
+        img = np.asarray(images[cam])
+        lo, hi = np.nanpercentile(img, [0.5, 99.8]) if img.size else (0, 1)
+        ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1, interpolation="nearest")
+        rows = picks[picks["camera"] == cam] if "camera" in picks.columns else picks
+        for r in rows.itertuples(index=False):
+            hw = getattr(r, "half_w", np.nan)
+            hh = getattr(r, "half_h", np.nan)
+            if np.isfinite(hw) and np.isfinite(hh):
+                ax.add_patch(Rectangle((r.x - hw, r.y - hh), 2 * hw, 2 * hh, fill=False, edgecolor="cyan", lw=0.7))
+            ax.plot([r.x], [r.y], "+", color="yellow", ms=6, mew=1)
+            ax.annotate(str(int(r.point)), (r.x, r.y), xytext=(3, -3), textcoords="offset points", fontsize=7,
+                        color="yellow", ha="left", va="bottom",
+                        bbox=dict(boxstyle="round,pad=0.1", facecolor="black", alpha=0.55, linewidth=0))
+        ax.set_title(f"{cam} view, frame {frame}: {len(rows)} markers picked", fontsize=9)
+        ax.set_xlabel("x (px)")
+        ax.set_ylabel("y (px)")
+        if len(rows):  # zoom on the picked area with a margin, so the numbers are readable
+            pad = 30.0
+            x0, x1 = rows["x"].min() - pad, rows["x"].max() + pad
+            y0, y1 = rows["y"].min() - pad, rows["y"].max() + pad
+            ax.set_xlim(max(x0, -0.5), min(x1, img.shape[1] - 0.5))
+            ax.set_ylim(min(y1, img.shape[0] - 0.5), max(y0, -0.5))
+    fig.tight_layout()
+    return fig

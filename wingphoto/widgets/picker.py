@@ -82,6 +82,13 @@ def _display_range(img):
     return float(lo), float(hi if hi > lo else lo + 1)
 
 
+def _number_label(ax, u, v, number, colour):
+    """Write ``number`` just beside its own centre (u, v), on a dark patch, so it is unambiguous."""
+    ax.annotate(str(number), (u, v), xytext=(4, -4), textcoords="offset points", ha="left", va="bottom",
+                color=colour, fontsize=9, clip_on=True, annotation_clip=True,
+                bbox=dict(boxstyle="round,pad=0.1", facecolor="black", alpha=0.55, linewidth=0))
+
+
 class ImageView:
     """Shared view machinery: figure, zoom/pan viewport per camera, mouse routing, status.
 
@@ -112,6 +119,7 @@ class ImageView:
             self._png = W.Image(format="png", layout=W.Layout(width=f"{figsize[0] * 80:.0f}px"))
             self._canvas_widget = self._png
         self.ax = self.fig.add_axes((0.0, 0.0, 1.0, 1.0))
+        self.ax.format_coord = self.format_coord
         self.fig.canvas.mpl_connect("button_press_event", self._mpl_press)
         self.fig.canvas.mpl_connect("motion_notify_event", self._mpl_motion)
         self.fig.canvas.mpl_connect("button_release_event", self._mpl_release)
@@ -129,6 +137,11 @@ class ImageView:
     def to_display(self, x, y):
         """Image pixels (x, y) of the camera shown -> display coordinates."""
         return self.viewport.to_display(x, y)
+
+    def format_coord(self, u, v):
+        """Coordinate readout under the figure: image pixels (not display coordinates)."""
+        x, y = self.to_image(u, v)
+        return f"{self._camera} x={x:.2f} y={y:.2f} px (zoom {self.zoom:g})"
 
     @property
     def zoom(self):
@@ -285,6 +298,13 @@ class ImageView:
         self.message = str(exc)
         logger.info("%s", exc)
 
+    def _static_hint(self):
+        """Status text that says how to get a clickable figure, when the figure is static."""
+        if self._png is None:
+            return ""
+        return ("static image: clicks are not received. Run <code>%matplotlib widget</code> in a cell "
+                "before creating the widget (needs ipympl), or pick with <code>wingphoto pick</code>")
+
     # ---------------------------------------------------------------- drawing
     def _draw_image(self, img):
         ax = self.ax
@@ -381,9 +401,9 @@ class Picker(ImageView):
         size_right = sizes.get("right") if sizes.get("right") != sizes["left"] else None
         if state is None:
             state = PickerState(image_size=sizes["left"], image_size_right=size_right, cameras=cameras,
-                                n_points=n_points, half_size=half_size)
+                                n_points=n_points, half_size=half_size, frame=self.frame)
         self._check_compatible(state)
-        self.state = self._fill_sizes(state)
+        self.state = dataclasses.replace(self._fill_sizes(state), frame=self.frame)
         self._camera = self.state.camera
         self._move_armed = False
         self._init_view(sizes, figsize)
@@ -412,7 +432,9 @@ class Picker(ImageView):
         Raises
         ------
         FileNotFoundError
-            In headless mode when ``picks_path`` does not exist.
+            When ``picks_path`` does not exist and nobody can click: in headless mode
+            (``WINGPHOTO_HEADLESS=1``) or outside a Jupyter kernel (a script); the message
+            says how to make the file (``wingphoto pick``).
         """
         path = Path(picks_path)
         if path.is_file():
@@ -422,6 +444,12 @@ class Picker(ImageView):
             raise FileNotFoundError(
                 f"WINGPHOTO_HEADLESS is set but the picks file {path} does not exist; run the picker "
                 "interactively once and press Save, or unset WINGPHOTO_HEADLESS"
+            )
+        if not _in_kernel():
+            raise FileNotFoundError(
+                f"picks file {path} does not exist and there is no notebook to click in; make it with "
+                f"`wingphoto pick FRAMES_LEFT FRAMES_RIGHT --out {path}` (a window to click in), in a "
+                "notebook with this picker, or write the CSV of docs/picks.md by hand"
             )
         return cls(frames_left, frames_right, picks_path=path, **kwargs)
 
@@ -456,8 +484,11 @@ class Picker(ImageView):
                                           layout=W.Layout(width="150px"))
         self.prev_button = W.Button(description="◀ Prev", layout=W.Layout(width="80px"))
         self.next_button = W.Button(description="Next ▶", layout=W.Layout(width="80px"))
-        self.zoom_slider = W.FloatSlider(value=1.0, min=1.0, max=8.0, step=0.5, description="Zoom")
-        self.box_slider = W.IntSlider(value=int(round(s.half_size[0])), min=1, max=100, description="Box ±px")
+        self.zoom_slider = W.FloatSlider(value=1.0, min=1.0, max=8.0, step=0.5, description="Zoom",
+                                         continuous_update=False)
+        # one event per drag of the slider, so one drag is one undo step
+        self.box_slider = W.IntSlider(value=int(round(s.half_size[0])), min=1, max=100, description="Box ±px",
+                                      continuous_update=False)
         self.move_button = W.Button(description="Move", tooltip="the next click moves the active marker")
         self.delete_button = W.Button(description="Delete", tooltip="delete the active marker in this view")
         self.undo_button = W.Button(description="Undo")
@@ -478,13 +509,15 @@ class Picker(ImageView):
         self.undo_button.on_click(lambda _: self.undo())
         self.save_button.on_click(lambda _: self.save())
         self.load_button.on_click(lambda _: self.load())
+        # the status line (instructions, save confirmations, errors) sits with the controls,
+        # above the figure, so it is in sight of the buttons in a normal window
         self.widget = W.VBox([
             W.HBox([self.camera_toggle, self.point_box, self.prev_button, self.next_button]),
             W.HBox([self.zoom_slider, self.box_slider]),
             W.HBox([self.move_button, self.delete_button, self.undo_button, self.save_button,
                     self.load_button, self.path_text]),
-            self._canvas_widget,
             self.status,
+            self._canvas_widget,
         ])
 
     # ---------------------------------------------------------------- state changes
@@ -516,8 +549,19 @@ class Picker(ImageView):
         if self._move_armed:
             self._move_armed = False
             self._apply(self.state.move, self._camera, self.state.current, x, y)
-        else:
-            self._apply(self.state.place, self._camera, x, y)
+            return
+        placed = self.state.get(self._camera, self.state.current)
+        if placed is not None:  # never move a placed marker by a stray click
+            if self.state.missing()[self._camera] == [] and self.state.n_points is not None:
+                what = f"all {self.state.n_points} markers are placed in the {self._camera} view"
+            else:
+                what = f"point {placed.point} is already placed in the {self._camera} view"
+            self._report(ValueError(
+                f"{what}; this click was ignored. Drag a marker's box to move it, press Move to re-place "
+                f"point {placed.point}, choose another number, or switch view"))
+            self.render()
+            return
+        self._apply(self.state.place, self._camera, x, y)
 
     def _press_target(self, x, y):
         picks = sorted(self.state.picks_of(self._camera), key=lambda p: p.point != self.state.current)
@@ -529,18 +573,23 @@ class Picker(ImageView):
             on_x_edge = abs(dx - p.half_w) <= tx and dy <= p.half_h + ty
             on_y_edge = abs(dy - p.half_h) <= ty and dx <= p.half_w + tx
             if on_x_edge or on_y_edge:
-                return ("resize", p)
+                return ("resize", p, (on_x_edge, on_y_edge))
         for p in picks:
             if abs(x - p.x) <= p.half_w and abs(y - p.y) <= p.half_h:
                 return ("move", p)
         return ("pan", None)
 
     def _drag_to(self, press, x, y):
-        kind, pick = press["target"]
+        kind, pick = press["target"][:2]
         if kind == "move":
             x0, y0 = press["image"]
             return self.state.move(self._camera, pick.point, pick.x + x - x0, pick.y + y - y0).select(pick.point)
-        return self.state.resize(self._camera, pick.point, max(abs(x - pick.x), 1.0), max(abs(y - pick.y), 1.0))
+        # an edge changes its own half-size only (a corner both): the box never collapses
+        x_edge, y_edge = press["target"][2]
+        x0, y0 = press["image"]
+        half_w = max(pick.half_w + (abs(x - pick.x) - abs(x0 - pick.x)), 1.0) if x_edge else pick.half_w
+        half_h = max(pick.half_h + (abs(y - pick.y) - abs(y0 - pick.y)), 1.0) if y_edge else pick.half_h
+        return self.state.resize(self._camera, pick.point, half_w, half_h).select(pick.point)
 
     # ---------------------------------------------------------------- controls as methods
     def set_camera(self, camera):
@@ -605,7 +654,7 @@ class Picker(ImageView):
         """Load picks from ``path`` or the File box (undoable)."""
         try:
             path = self._path(path)
-            loaded = self._fill_sizes(PickerState.load(path))
+            loaded = dataclasses.replace(self._fill_sizes(PickerState.load(path)), frame=self.frame)
             self._check_compatible(loaded)
         except (ValueError, FileNotFoundError) as exc:
             self._report(exc)
@@ -634,8 +683,7 @@ class Picker(ImageView):
                                         fill=False, edgecolor=colour, linewidth=1.5 if active else 1.0))
             u, v = vp.to_display(p.x, p.y)
             self.ax.plot([u], [v], "+", color=colour, markersize=8)
-            self.ax.text(u + (p.half_w + 1) * vp.zoom, v - (p.half_h + 1) * vp.zoom, str(p.point),
-                         color=colour, fontsize=9, clip_on=True)
+            _number_label(self.ax, u, v, p.point, colour)
         missing = state.missing()
         parts = [f"<b>{cam}</b> view, frame {self.frame}, active point <b>{state.current}</b>"]
         counts = [f"{c}: {len(state.numbers(c))} placed" + (f", missing {missing[c]}" if missing[c] else "")
@@ -645,5 +693,31 @@ class Picker(ImageView):
             parts.append("complete")
         if self.message:
             parts.append(f"<i>{html.escape(self.message)}</i>")
+        hint = self._static_hint()
+        if hint:
+            parts.append(hint)
         self.status.value = "<br>".join(parts)
         self._show()
+
+    # ---------------------------------------------------------------- static figure
+    def static_figure(self, *, figsize=None):
+        """A figure of the numbered picks on every view (what a reader sees headless).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            One panel per camera: the picked frame, each marker's box, centre and number.
+        """
+        from ..plots import plot_picks
+
+        return plot_picks(self.images, self.state, frame=self.frame, figsize=figsize)
+
+    def _ipython_display_(self):
+        """Show the widget; headless (or with no figure to click), the static figure of the picks."""
+        from IPython.display import display
+
+        if headless():
+            fig = self.static_figure()
+            display(fig)
+            return
+        display(self.widget)

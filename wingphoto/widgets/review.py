@@ -16,7 +16,7 @@ import ipywidgets as W
 import numpy as np
 import pandas as pd
 
-from .picker import ImageView, frame_image, n_frames_of
+from .picker import ImageView, _number_label, frame_image, n_frames_of
 from .state import ReviewState, _merge_camera_tracks, read_corrections, replay_corrections
 
 __all__ = ["TrackReview", "default_retrack"]
@@ -141,7 +141,8 @@ class TrackReview(ImageView):
                                         continuous_update=False, layout=W.Layout(width="420px"))
         self.point_box = W.BoundedIntText(value=s.point or 0, min=0, max=10**6, description="Point",
                                           layout=W.Layout(width="150px"))
-        self.zoom_slider = W.FloatSlider(value=1.0, min=1.0, max=8.0, step=0.5, description="Zoom")
+        self.zoom_slider = W.FloatSlider(value=1.0, min=1.0, max=8.0, step=0.5, description="Zoom",
+                                         continuous_update=False)
         self.problem_list = W.Select(options=[], rows=8, description="Problems", layout=W.Layout(width="320px"))
         self.prev_problem_button = W.Button(description="◀ Prev problem")
         self.next_problem_button = W.Button(description="Next problem ▶")
@@ -164,13 +165,14 @@ class TrackReview(ImageView):
         self.undo_button.on_click(lambda _: self.undo())
         self.save_button.on_click(lambda _: self.save())
         self.load_button.on_click(lambda _: self.load())
+        # Undo/Save and the status line sit above the figure, in sight of the controls
         self.widget = W.VBox([
             W.HBox([self.camera_toggle, self.point_box, self.zoom_slider]),
             self.frame_slider,
-            W.HBox([self._canvas_widget,
-                    W.VBox([self.problem_list, W.HBox([self.prev_problem_button, self.next_problem_button])])]),
             W.HBox([self.undo_button, self.save_button, self.load_button, self.path_text, self.retrack_check]),
             self.status,
+            W.HBox([self._canvas_widget,
+                    W.VBox([self.problem_list, W.HBox([self.prev_problem_button, self.next_problem_button])])]),
         ])
 
     # ---------------------------------------------------------------- state changes
@@ -179,15 +181,37 @@ class TrackReview(ImageView):
     _centre_by_default = True
 
     def _centre_target(self, state):
-        return state.position()
+        return self._known_position(state)
+
+    def _known_position(self, state=None, camera=None):
+        """(x, y) of the selected point in the shown frame, or where it was last seen.
+
+        A lost point has no position; its last finite position before the frame (else the
+        first after it) is used to centre the zoom and to highlight it.
+        """
+        state = self.state if state is None else state
+        camera = self._camera if camera is None else camera
+        x, y = state.position(camera=camera)
+        if np.isfinite(x) and np.isfinite(y):
+            return x, y
+        t = state.tracks
+        t = t[(t["camera"] == camera) & (t["point"] == state.point)]
+        t = t[np.isfinite(t["x"].to_numpy(float)) & np.isfinite(t["y"].to_numpy(float))]
+        if t.empty:
+            return (np.nan, np.nan)
+        before = t[t["frame"] < state.frame]
+        row = before.loc[before["frame"].idxmax()] if len(before) else t.loc[t["frame"].idxmin()]
+        return float(row["x"]), float(row["y"])
 
     def _problem_options(self):
+        """One entry per flagged/lost (frame, point, camera), labelled with its camera and reason."""
         table = self.state.problem_table
-        labels = {}
-        for r in table.itertuples(index=False):
-            key = (int(r.frame), int(r.point))
-            labels.setdefault(key, []).append(f"{r.camera} {r.status}")
-        options = [(f"frame {f}, point {p}: " + ", ".join(v), (f, p)) for (f, p), v in labels.items()]
+        reasons = table["reason"] if "reason" in table.columns else pd.Series("", index=table.index)
+        options = []
+        for r, why in zip(table.itertuples(index=False), reasons):
+            why = "" if not isinstance(why, str) or not why else f" ({why})"
+            options.append((f"frame {int(r.frame)}, point {int(r.point)}, {r.camera}: {r.status}{why}",
+                            (int(r.frame), int(r.point), str(r.camera))))
         return options[:MAX_LISTED]
 
     def _after_change(self):
@@ -201,7 +225,8 @@ class TrackReview(ImageView):
             options = self._problem_options()
             if options != list(self.problem_list.options):
                 self.problem_list.options = options
-            current = (s.frame, s.point)
+            # highlight only the problem of the camera shown
+            current = (s.frame, s.point, s.camera)
             self.problem_list.value = current if any(v == current for _, v in options) else None
             self.undo_button.disabled = not s.can_undo
         finally:
@@ -310,16 +335,19 @@ class TrackReview(ImageView):
         """Go to a (frame, point) item of the problem list."""
         if item is None:
             return
-        frame, point = item
-        table = self.state.problem_table
-        cams = table[(table["frame"] == frame) & (table["point"] == point)]["camera"].tolist()
-        camera = self.state.camera if (not cams or self.state.camera in cams) else cams[0]
-        self._apply(lambda: self.state.goto(frame).select(point, camera=camera))
+        if len(item) == 3:
+            frame, point, camera = item
+        else:
+            frame, point = item
+            table = self.state.problem_table
+            cams = table[(table["frame"] == frame) & (table["point"] == point)]["camera"].tolist()
+            camera = self.state.camera if (not cams or self.state.camera in cams) else cams[0]
+        self._apply(lambda: self.state.goto(frame).select(point, camera=camera), centre=True)
 
     def set_zoom(self, zoom):
         """Magnify the view, centred on the selected point when it has a position."""
         try:
-            x, y = self.state.position()
+            x, y = self._known_position()
             self._set_viewports(float(zoom), (x, y) if np.isfinite(x) and np.isfinite(y) else None)
         except ValueError as exc:
             self._report(exc)
@@ -423,11 +451,19 @@ class TrackReview(ImageView):
             self.ax.scatter(u, v, s=30, facecolors=face, edgecolors=colour, linewidths=1.2)
             for uu, vv, p in zip(u, v, rows["point"].to_numpy(int)):
                 if np.isfinite(uu) and np.isfinite(vv):
-                    self.ax.text(uu + 4, vv - 4, str(p), color=colour, fontsize=8, clip_on=True)
+                    _number_label(self.ax, uu, vv, p, colour)
         x, y = s.position(frame=frame, camera=cam)
         if np.isfinite(x) and np.isfinite(y):
             u, v = vp.to_display(x, y)
             self.ax.scatter([u], [v], s=200, facecolors="none", edgecolors="yellow", linewidths=1.5)
+        elif s.point is not None:  # lost here: ring its last known position, dashed
+            x, y = self._known_position(s, cam)
+            if np.isfinite(x) and np.isfinite(y):
+                u, v = vp.to_display(x, y)
+                self.ax.scatter([u], [v], s=260, facecolors="none", edgecolors="yellow", linewidths=1.5,
+                                linestyles="--")
+                self.ax.annotate(f"{s.point} lost: last seen here", (u, v), xytext=(10, 10),
+                                 textcoords="offset points", color="yellow", fontsize=8)
         row = now[now["point"] == s.point]
         status = row["status"].iloc[0] if len(row) else "absent"
         parts = [f"<b>{cam}</b> frame <b>{frame}</b>/{s.n_frames - 1}, point <b>{s.point}</b> ({status})",
@@ -435,6 +471,9 @@ class TrackReview(ImageView):
                  + ("" if self.retrack is not None else ", re-tracking unavailable")]
         if self.message:
             parts.append(f"<i>{html.escape(self.message)}</i>")
+        hint = self._static_hint()
+        if hint:
+            parts.append(hint)
         self.status.value = "<br>".join(parts)
         self._show()
 

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from ..io import atomic_write
+from ..picks import PICKS_FORMAT, SAME_SPOT_PX, picks_document, read_picks, read_picks_document
 
 __all__ = [
     "Pick",
@@ -39,7 +40,8 @@ __all__ = [
 
 CAMERAS = ("left", "right")
 MAX_UNDO = 200
-PICKS_FORMAT = "wingphoto-picks"
+#: smallest half size (px) a new marker's box is shrunk to so that it does not overlap a neighbour's
+MIN_AUTO_HALF = 3.0
 CORRECTIONS_FORMAT = "wingphoto-corrections"
 PROBLEM_STATUS = ("flagged", "lost")
 TRACK_COLUMNS = ("camera", "frame", "point", "x", "y", "score", "status")
@@ -92,6 +94,17 @@ def _check_inside(x, y, size, what):
                 "origin at the centre of the top-left pixel); click inside the image"
             )
     return x, y
+
+
+def _check_free(picks, point, x, y, camera):
+    """Raise ValueError when another marker of the view lies on (x, y) (the same spot)."""
+    for p in picks:
+        if p.point != point and math.hypot(p.x - x, p.y - y) < SAME_SPOT_PX:
+            raise ValueError(
+                f"point {p.point} is already at ({p.x:.1f}, {p.y:.1f}) in the {camera} view, less than "
+                f"{SAME_SPOT_PX:g} px from this click; each marker is picked once (drag point {p.point} "
+                "to move it, or Delete it)"
+            )
 
 
 def _push(state, **changes):
@@ -189,13 +202,17 @@ class Viewport:
 
 # --------------------------------------------------------------------------- picker
 class Pick(NamedTuple):
-    """One picked marker in one view: centre and half size of its subimage rectangle (px)."""
+    """One picked marker in one view: centre and half size of its subimage rectangle (px).
+
+    ``frame`` is the frame the marker was picked in (default 0, where tracking starts).
+    """
 
     point: int
     x: float
     y: float
     half_w: float
     half_h: float
+    frame: int = 0
 
 
 def _as_picks(value, camera):
@@ -204,7 +221,8 @@ def _as_picks(value, camera):
         p = Pick(*p) if not isinstance(p, Pick) else p
         point = _point_number(p.point, f"{camera} pick point")
         picks.append(
-            Pick(point, _finite(p.x, "x"), _finite(p.y, "y"), _finite(p.half_w, "half_w"), _finite(p.half_h, "half_h"))
+            Pick(point, _finite(p.x, "x"), _finite(p.y, "y"), _finite(p.half_w, "half_w"), _finite(p.half_h, "half_h"),
+                 _point_number(p.frame, f"{camera} pick frame"))
         )
     numbers = [p.point for p in picks]
     if len(set(numbers)) != len(numbers):
@@ -241,6 +259,8 @@ class PickerState:
         Number of markers expected (numbers 0 .. n_points - 1); None leaves it open.
     half_size : (half_w, half_h)
         Rectangle half size in pixels given to newly placed markers.
+    frame : int
+        Frame being picked in (default 0); :meth:`place` records it in each new pick.
     history : tuple of PickerState
         Previous states, newest first (at most 200); not saved to JSON, not compared.
 
@@ -273,6 +293,7 @@ class PickerState:
     current: int = 0
     n_points: int | None = None
     half_size: tuple = (10.0, 10.0)
+    frame: int = 0
     history: tuple = field(default=(), repr=False, compare=False)
 
     def __post_init__(self):
@@ -293,6 +314,7 @@ class PickerState:
         if hw <= 0 or hh <= 0:
             raise ValueError(f"half_size must be positive (half_w, half_h) in pixels, got {self.half_size!r}")
         object.__setattr__(self, "half_size", (hw, hh))
+        object.__setattr__(self, "frame", _point_number(self.frame, "frame"))
         for cam in CAMERAS:
             picks = _as_picks(getattr(self, cam), cam)
             if picks and cam not in cams:
@@ -301,6 +323,7 @@ class PickerState:
                 self._check_number(p.point, f"{cam} pick point")
                 _check_inside(p.x, p.y, self.size_of(cam), f"{cam} image")
                 self._check_half(p.half_w, p.half_h)
+                _check_free(picks, p.point, p.x, p.y, cam)
             object.__setattr__(self, cam, picks)
         object.__setattr__(self, "history", tuple(self.history))
 
@@ -418,27 +441,55 @@ class PickerState:
             )
         return pick
 
+    def _fit_boxes(self, camera, pick):
+        """Picks of ``camera`` with ``pick`` added, default-sized boxes shrunk so none overlap.
+
+        A new marker's box, and the boxes of neighbours that still have the default size
+        (:attr:`half_size`), are shrunk to at most half the distance (along x or y, the
+        larger) to the nearest other marker, but not below :data:`MIN_AUTO_HALF` px; boxes
+        the user resized are kept.
+        """
+        others = [p for p in self.picks_of(camera) if p.point != pick.point]
+        everyone = others + [pick]
+
+        def fitted(p):
+            if (p.half_w, p.half_h) != self.half_size and p is not pick:
+                return p
+            gaps = [max(abs(q.x - p.x), abs(q.y - p.y)) for q in everyone if q.point != p.point]
+            if not gaps:
+                return p
+            limit = max(MIN_AUTO_HALF, math.floor(min(gaps)) / 2.0)
+            return p._replace(half_w=min(p.half_w, limit), half_h=min(p.half_h, limit))
+
+        return tuple(sorted((fitted(p) for p in everyone), key=lambda p: p.point))
+
     def place(self, camera, x, y, *, point=None):
         """Place marker ``point`` (default the active one) at (x, y) in ``camera``.
 
         Placing in a view other than the active one starts at that view's first missing
-        number. A marker already placed there is moved (its rectangle size kept). The active
-        camera becomes ``camera`` and the active number advances to the next number
-        missing in that view.
+        number. A marker already placed there is moved (its rectangle size kept). A new
+        marker gets the default :attr:`half_size` box, shrunk (with default-sized neighbours)
+        so that boxes do not overlap (:meth:`_fit_boxes`). The active camera becomes
+        ``camera`` and the active number advances to the next number missing in that view.
 
         Raises
         ------
         ValueError
-            Unknown camera, bad number, or (x, y) outside the image.
+            Unknown camera, bad number, (x, y) outside the image, or (x, y) on another
+            marker of that view (less than ``SAME_SPOT_PX`` away).
         """
         self._check_camera(camera)
         if point is None:
             point = self.current if camera == self.camera else self.first_missing(camera)
         point = self._check_number(point)
         x, y = _check_inside(x, y, self.size_of(camera), f"{camera} image")
+        _check_free(self.picks_of(camera), point, x, y, camera)
         old = self.get(camera, point)
-        hw, hh = (old.half_w, old.half_h) if old is not None else self.half_size
-        new = self._with_pick(camera, Pick(point, x, y, hw, hh), camera=camera)
+        if old is not None:
+            new = self._with_pick(camera, old._replace(x=x, y=y, frame=self.frame), camera=camera)
+        else:
+            picks = self._fit_boxes(camera, Pick(point, x, y, *self.half_size, self.frame))
+            new = _push(self, **{camera: picks}, camera=camera)
         nxt = new.next_missing(camera, after=point)
         return dataclasses.replace(new, current=point if nxt is None else nxt)
 
@@ -446,6 +497,7 @@ class PickerState:
         """Move placed marker ``point`` of ``camera`` to (x, y); ValueError if not placed."""
         pick = self._require(camera, point)
         x, y = _check_inside(x, y, self.size_of(camera), f"{camera} image")
+        _check_free(self.picks_of(camera), point, x, y, camera)
         return self._with_pick(camera, pick._replace(x=x, y=y))
 
     def resize(self, camera, point, half_w, half_h):
@@ -509,15 +561,19 @@ class PickerState:
         Returns
         -------
         picks : pandas.DataFrame
-            Columns point (int64), x, y (px), half_w, half_h (px, float64) and half_size
-            (the larger half side, for a square template); one row per number
-            ``0 .. n_rows - 1``, NaN where the number is missing in this view.
+            Columns point (int64), frame (int64, the frame each marker was picked in), x,
+            y (px), half_w, half_h (px, float64) and half_size (the larger half side, for a
+            square template); one row per number ``0 .. n_rows - 1``, NaN (frame 0)
+            where the number is missing in this view.
         """
         self._check_camera(camera)
         rows = np.full((self.n_rows, 4), np.nan)
+        frames = np.zeros(self.n_rows, np.int64)
         for p in self.picks_of(camera):
             rows[p.point] = (p.x, p.y, p.half_w, p.half_h)
+            frames[p.point] = p.frame
         df = pd.DataFrame(rows, columns=["x", "y", "half_w", "half_h"])
+        df.insert(0, "frame", frames)
         df.insert(0, "point", np.arange(self.n_rows, dtype=np.int64))
         df["half_size"] = np.fmax(df["half_w"].to_numpy(), df["half_h"].to_numpy())
         if dropna:
@@ -528,44 +584,52 @@ class PickerState:
         """(N, 2) array of marker centres (x, y) in px, row k = number k, NaN when missing."""
         return self.to_frame(camera)[["x", "y"]].to_numpy(np.float64)
 
+    def to_table(self):
+        """Every pick as one tidy table: camera, point, frame, x, y, half_w, half_h."""
+        rows = [(cam, p.point, p.frame, p.x, p.y, p.half_w, p.half_h)
+                for cam in self.cameras for p in self.picks_of(cam)]
+        table = pd.DataFrame(rows, columns=["camera", "point", "frame", "x", "y", "half_w", "half_h"])
+        return table.astype({"point": np.int64, "frame": np.int64, "x": np.float64, "y": np.float64,
+                             "half_w": np.float64, "half_h": np.float64})
+
     def to_dict(self):
-        """JSON-ready dict (the saved picks file); the undo history is not included."""
-        return {
-            "format": PICKS_FORMAT,
-            "version": 1,
-            "cameras": list(self.cameras),
-            "image_size": None if self.image_size is None else list(self.image_size),
-            "image_size_right": None if self.image_size_right is None else list(self.image_size_right),
-            "n_points": self.n_points,
-            "half_size": list(self.half_size),
-            "camera": self.camera,
-            "current": self.current,
-            "picks": {cam: [p._asdict() for p in self.picks_of(cam)] for cam in self.cameras},
-        }
+        """JSON-ready dict (the saved picks file, :mod:`wingphoto.picks`); no undo history."""
+        return picks_document(
+            self.to_table(),
+            cameras=list(self.cameras),
+            image_size=self.image_size,
+            image_size_right=self.image_size_right,
+            n_points=self.n_points,
+            half_size=self.half_size,
+            camera=self.camera,
+            current=self.current,
+        )
 
     def to_json(self):
         """The saved picks file as a JSON string (see :meth:`from_json`)."""
         return json.dumps(self.to_dict(), indent=1)
 
     @classmethod
+    def from_table(cls, table, **meta):
+        """Build a state from a tidy picks table (camera, point, [frame,] x, y, [half_w, half_h])."""
+        picks = {cam: [] for cam in CAMERAS}
+        for r in table.itertuples(index=False):
+            picks[r.camera].append(Pick(int(r.point), float(r.x), float(r.y), float(r.half_w), float(r.half_h),
+                                        int(r.frame)))
+        cameras = tuple(meta.pop("cameras", None) or [c for c in CAMERAS if picks[c]] or CAMERAS)
+        for cam in CAMERAS:
+            if picks[cam] and cam not in cameras:
+                cameras = cameras + (cam,)
+        if meta.get("camera") not in cameras:
+            meta["camera"] = cameras[0]
+        return cls(cameras=cameras, **meta, left=tuple(picks["left"]), right=tuple(picks["right"]))
+
+    @classmethod
     def from_dict(cls, data, *, source="picks"):
         """Build a state from :meth:`to_dict` output; ValueError naming ``source`` if malformed."""
-        if not isinstance(data, dict) or data.get("format") != PICKS_FORMAT:
-            raise ValueError(f"{source} is not a wingphoto picks file (expected format {PICKS_FORMAT!r})")
-        if data.get("version") != 1:
-            raise ValueError(f"{source} has picks format version {data.get('version')!r}; this wingphoto reads 1")
+        table, meta = read_picks_document(data, source=source)
         try:
-            picks = {cam: tuple(Pick(**p) for p in data["picks"].get(cam, [])) for cam in CAMERAS}
-            return cls(
-                image_size=data.get("image_size"),
-                image_size_right=data.get("image_size_right"),
-                cameras=tuple(data.get("cameras", CAMERAS)),
-                camera=data.get("camera", "left"),
-                current=data.get("current", 0),
-                n_points=data.get("n_points"),
-                half_size=tuple(data.get("half_size", (10.0, 10.0))),
-                **picks,
-            )
+            return cls.from_table(table, **meta)
         except (KeyError, TypeError) as exc:
             raise ValueError(f"{source} is a malformed picks file: {exc!r}") from None
 
@@ -579,15 +643,22 @@ class PickerState:
         return cls.from_dict(data)
 
     def save(self, path):
-        """Write the picks to a JSON file atomically (an interrupted save keeps the old file)."""
+        """Write the picks to a JSON file atomically (an interrupted save keeps the old file).
+
+        A ``.csv`` path writes the documented CSV instead (picks only, no picker state).
+        """
         path = Path(path)
+        if path.suffix.lower() == ".csv":
+            from ..picks import write_picks
+
+            return write_picks(self.to_table(), path)
         with atomic_write(path, "w", encoding="utf-8") as f:
             f.write(self.to_json())
         return path
 
     @classmethod
     def load(cls, path):
-        """Read picks saved by :meth:`save`.
+        """Read picks saved by :meth:`save` (JSON) or a picks CSV (``docs/picks.md``).
 
         Raises
         ------
@@ -597,12 +668,16 @@ class PickerState:
             When the file is not a wingphoto picks file.
         """
         path = Path(path)
+        if path.suffix.lower() == ".csv":
+            return cls.from_table(read_picks(path))
         if not path.is_file():
-            raise FileNotFoundError(f"picks file {path} not found; pick the markers first and save them there")
+            read_picks(path)  # raises the FileNotFoundError that says how to make one
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except json.JSONDecodeError as exc:
             raise ValueError(f"picks file {path} is not valid JSON: {exc}") from None
+        except UnicodeDecodeError:
+            raise ValueError(f"picks file {path} is not text (binary content)") from None
         return cls.from_dict(data, source=f"picks file {path}")
 
     @classmethod
@@ -644,7 +719,8 @@ class PickerState:
                     continue
                 hw = float(getattr(r, "half_w", np.nan))
                 hh = float(getattr(r, "half_h", np.nan))
-                rows.append(Pick(int(r.point), x, y, hw0 if np.isnan(hw) else hw, hh0 if np.isnan(hh) else hh))
+                rows.append(Pick(int(r.point), x, y, hw0 if np.isnan(hw) else hw, hh0 if np.isnan(hh) else hh,
+                                 int(getattr(r, "frame", 0))))
             out[cam] = tuple(rows)
         cameras = tuple(c for c in CAMERAS if c in out)
         if set(out) - set(CAMERAS):
