@@ -406,6 +406,60 @@ class WingMotion:
         S, B = self.scene
         return S + self.model.surface(sigma, xi, float(self.times[frame])) @ B.T
 
+    def partial_tests(self, windows, *, moves=None, noise_mm=0.0, seed=0):
+        """Split the motion into tests that each see the wing only over part of the stroke.
+
+        Each test is the same motion captured by a camera placement that sees the wing
+        markers only while the true stroke angle lies in its window (the mount and
+        reference dots are always seen), expressed in its own camera frame: the cameras
+        moved between tests by a known rigid motion.
+
+        Parameters
+        ----------
+        windows : sequence of (float, float)
+            Stroke-angle window (deg, true stroke angle) of each test.
+        moves : sequence of ((3, 3), (3,)), optional
+            ``(R_k, t_k)``: test ``k`` sees ``R_k X + t_k``. Default: identity for the
+            first test, and for the others a rotation of 2-6 deg about a random axis
+            and a 5-20 mm translation drawn from ``seed``.
+        noise_mm : float
+            Gaussian noise added to every coordinate (mm, 1-sigma).
+        seed : int
+
+        Returns
+        -------
+        tests : list of pandas.DataFrame
+            Points tables (frame, point, X, Y, Z, reproj_err), NaN where not seen.
+        moves : list of ((3, 3) ndarray, (3,) ndarray)
+        """
+        rng = np.random.default_rng(seed)
+        if moves is None:
+            moves = [(np.eye(3), np.zeros(3))]
+            for _ in range(len(windows) - 1):
+                ax = rng.normal(size=3)
+                ax /= np.linalg.norm(ax)
+                ang = np.radians(rng.uniform(2.0, 6.0))
+                K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+                R = np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K
+                t = rng.normal(size=3)
+                t *= rng.uniform(5.0, 20.0) / np.linalg.norm(t)
+                moves.append((R, t))
+        if len(moves) != len(windows):
+            raise ValueError(f"give one move per window ({len(windows)}), got {len(moves)}")
+        stroke = self.kinematics["stroke_deg"]
+        wing = self.kinds == "wing"
+        tests = []
+        for (lo, hi), (R, t) in zip(windows, moves):
+            seen = np.ones(self.points3d.shape[:2], bool)
+            seen[:, wing] = ((stroke >= lo) & (stroke <= hi))[:, None]
+            df = self.points(visible=seen)
+            X = df[["X", "Y", "Z"]].to_numpy() @ np.asarray(R).T + np.asarray(t)
+            if noise_mm > 0:
+                X = X + rng.normal(scale=float(noise_mm), size=X.shape)
+            df[["X", "Y", "Z"]] = X
+            tests.append(df)
+        return tests, [(np.asarray(R, float), np.asarray(t, float)) for R, t in moves]
+
 
 def wing_motion(rig=None, *, n_frames=100, fps=3000.0, flap_hz=30.0, preset="clean", phase_deg=0.0,
                 stroke_amplitude_deg=None, pitch_deg=None, camber=None, bend_mm=None, deviation_deg=0.0,
