@@ -88,7 +88,7 @@ _SPECS = {
     "edge_on": _Spec("80 deg pitch: markers foreshorten to edge-on and back every half beat",
                      dict(_CLEAN, pitch_deg=80.0, camber=0.06)),
     "enter_leave": _Spec("principal points shifted so that the wing tip leaves and re-enters the frame",
-                         dict(_CLEAN, stroke_amplitude_deg=100.0), cc_shift=((0.0, 75.0), (0.0, -70.0))),
+                         dict(_CLEAN, stroke_amplitude_deg=100.0), cc_shift=((0.0, 165.0), (0.0, -150.0))),
     "dropped_frames": _Spec("fast stroke (100 deg, 40 Hz) with 3 single frames and one pair of frames "
                             "dropped by the recorder", _FAST),
     "repeated_frames": _Spec("fast stroke with 3 frames delivered twice (identical bytes)", _FAST),
