@@ -1,0 +1,122 @@
+"""Sequence checks on glitched copies of data-samples/flapping."""
+from __future__ import annotations
+
+import shutil
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+
+from wingphoto.integrity import SequenceWarning, check_sequence, check_stereo_sequences
+from wingphoto.io import read_sequence
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data-samples" / "flapping"
+
+
+@pytest.fixture(scope="module")
+def frames():
+    if not (SAMPLES / "left").is_dir():
+        pytest.skip("data-samples/flapping not available")
+    return read_sequence(SAMPLES / "left").to_array(), read_sequence(SAMPLES / "right").to_array()
+
+
+def copy_left(tmp_path, n=30):
+    out = tmp_path / "left"
+    out.mkdir()
+    for k in range(n):
+        shutil.copy(SAMPLES / "left" / f"frame_{k:04d}.tif", out / f"frame_{k:04d}.tif")
+    return out
+
+
+def test_clean_samples_pass_without_warnings(frames):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        seq = read_sequence(SAMPLES / "left")
+    rep = check_sequence(seq)
+    assert rep.ok, rep.summary()
+    assert rep.n_frames == 60 and rep.frame_numbers.tolist() == list(range(60))
+    stereo = check_stereo_sequences(SAMPLES / "left", SAMPLES / "right")
+    assert stereo.ok and stereo.offset == 0, stereo.summary()
+
+
+def test_duplicated_frame(tmp_path):
+    folder = copy_left(tmp_path)
+    shutil.copy(folder / "frame_0011.tif", folder / "frame_0012.tif")  # 12 overwritten by 11
+    rep = check_sequence(folder)
+    assert rep.duplicates.tolist() == [12]
+    assert "identical to the previous one at index 12" in rep.summary()
+
+
+def test_dropped_frame_warns_and_is_a_gap(tmp_path):
+    folder = copy_left(tmp_path)
+    (folder / "frame_0017.tif").unlink()
+    with pytest.warns(SequenceWarning, match=r"1 number\(s\) missing from the file numbering \(17\)"):
+        seq = read_sequence(folder)
+    assert len(seq) == 29
+    rep = check_sequence(folder)
+    assert rep.gaps == [17] and not rep.ok
+
+
+def test_stray_copy_warns_and_can_be_skipped(tmp_path):
+    folder = copy_left(tmp_path)
+    shutil.copy(folder / "frame_0020.tif", folder / "frame_0020 copy.tif")
+    with pytest.warns(SequenceWarning, match=r"'frame_0020 copy\.tif'"):
+        seq = read_sequence(folder)
+    assert len(seq) == 31 and seq.frame_numbers[21] == 20
+    clean = read_sequence(folder, strays="skip")
+    assert len(clean) == 30
+    with pytest.raises(ValueError, match="do not fit the sequence's numbering"):
+        read_sequence(folder, strays="error")
+    rep = check_sequence(folder)
+    assert [p.name for p in rep.strays] == ["frame_0020 copy.tif"]
+    assert rep.duplicates.tolist() == [21]  # the copy also duplicates its original
+
+
+def test_black_frame(tmp_path, frames):
+    folder = copy_left(tmp_path)
+    tifffile.imwrite(folder / "frame_0009.tif", np.zeros_like(frames[0][9]))
+    rep = check_sequence(folder)
+    assert rep.blank.tolist() == [9]
+    assert len(rep.jumps) == 0  # a blank frame is not a jump
+
+
+def test_five_pixel_camera_bump(frames):
+    left = frames[0].copy()
+    left[25:] = np.roll(left[25:], 5, axis=2)
+    rep = check_sequence(left)
+    assert rep.jumps["frame"].tolist() == [25], rep.jumps
+    assert abs(abs(rep.jumps["dx"].iloc[0]) - 5) < 1.0 and abs(rep.jumps["dy"].iloc[0]) < 1.0
+    clean = check_sequence(frames[0])
+    assert len(clean.jumps) == 0 and np.abs(np.diff(clean.camera_offset, axis=0)).max() < 1.0
+    small = frames[0].copy()
+    small[40:] = np.roll(small[40:], (3, -2), axis=(1, 2))  # 3.6 px diagonal bump
+    jumps = check_sequence(small).jumps
+    assert jumps["frame"].tolist() == [40] and abs(jumps["dy"].iloc[0] - 3) < 1 and abs(jumps["dx"].iloc[0] + 2) < 1
+
+
+@pytest.mark.parametrize("offset", [1, -1, 2])
+def test_left_right_offset(frames, offset):
+    left, right = frames
+    # drop frames at the start of one view: right frame t then shows left frame t + offset
+    if offset > 0:
+        l, r = left[: len(left) - offset], right[offset:]
+    else:
+        l, r = left[-offset:], right[: len(right) + offset]
+    expected = offset
+    rep = check_stereo_sequences(l, r)
+    assert rep.offset == expected and not rep.ok
+    assert "offset by" in rep.summary()
+
+
+def test_count_mismatch_is_a_problem(frames):
+    rep = check_stereo_sequences(frames[0], frames[1][:-3])
+    assert not rep.ok and "frame counts differ: left 60, right 57" in rep.summary()
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="frames must be"):
+        check_sequence(42)
+    with pytest.raises(ValueError, match="2-D grey frames"):
+        check_sequence(np.zeros((3, 4, 5, 3)))
