@@ -103,7 +103,31 @@ def load_picks(path, camera):
     return _load_picks(path, camera)
 
 
-def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, progress=True, **options):
+def _checked(frames, name, *, force):
+    """Open ``frames`` and run :func:`wingphoto.check_sequence`; stop on wrong frames unless forced."""
+    from .integrity import check_sequence
+
+    seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
+    report = check_sequence(seq)
+    stop = []
+    if len(report.duplicates):
+        stop.append(f"duplicated frame(s) at index {', '.join(str(int(i)) for i in report.duplicates[:8])}")
+    if report.strays:
+        stop.append(f"stray file(s) {', '.join(Path(p).name for p in report.strays[:3])}")
+    for line in report.problems():
+        if not any(line.startswith(k) for k in ("stray", "duplic")) and "identical" not in line:
+            log.warning("%s: %s", name, line)
+    if stop and not force:
+        raise ValueError(
+            f"{name} ({report.source or 'frames'}) has {'; '.join(stop)}: tracking them would give wrong "
+            f"positions at the wrong times. Fix the sequence (see `wingphoto check`), or pass force=True "
+            f"(--force) to track it anyway"
+        )
+    return seq, report
+
+
+def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, progress=True, check=True,
+                 force=False, **options):
     """Track the picked markers through one camera's sequence.
 
     Parameters
@@ -117,6 +141,11 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
         Tracks CSV to write.
     checkpoint : str or Path, optional
         Checkpoint file; a rerun resumes from it with identical results.
+    check : bool
+        Run :func:`wingphoto.check_sequence` first (default True): duplicated frames and
+        stray files stop the run unless ``force``; blank frames, jumps and gaps are logged.
+    force : bool
+        Track despite a failed check.
 
     Returns
     -------
@@ -125,7 +154,10 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     """
     from .track import track_markers
 
-    seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
+    if check:
+        seq, _ = _checked(frames, f"{camera} sequence", force=force)
+    else:
+        seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
     table = load_picks(picks, camera) if isinstance(picks, (str, Path)) else picks
     tracks = track_markers(seq, table, camera=camera, checkpoint=checkpoint, progress=progress, **options)
     if out is not None:
@@ -133,7 +165,8 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     return tracks
 
 
-def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, progress=True, **options):
+def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, progress=True, check=True,
+                 force=False, **options):
     """Track both views, check them against each other, and triangulate.
 
     Parameters
@@ -148,6 +181,12 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
     checkpoint_dir : str or Path, optional
         Folder for per-camera checkpoints (``checkpoint_left.npz`` ...), so an interrupted
         run resumes.
+    check : bool
+        Run :func:`wingphoto.check_stereo_sequences` first (default True): a left/right
+        mismatch (frame counts, rates, time stamps, a frame offset, duplicated frames,
+        gaps or stray files) stops with a message naming it, unless ``force``.
+    force : bool
+        Go on despite a failed check (the findings are logged).
     **options
         Passed to :func:`wingphoto.track.track_markers`.
 
@@ -168,10 +207,28 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
         tables = picks
     else:  # a PickerState
         tables = {cam: picks.to_frame(cam) for cam in ("left", "right")}
+    if check:
+        from .integrity import check_stereo_sequences
+
+        frames_left = read_sequence(frames_left) if isinstance(frames_left, (str, Path)) else frames_left
+        frames_right = read_sequence(frames_right) if isinstance(frames_right, (str, Path)) else frames_right
+        report = check_stereo_sequences(frames_left, frames_right)
+        for note in report.notes:
+            log.warning("%s", note)
+        if not report.ok:
+            if not force:
+                raise ValueError(
+                    "left and right sequences do not match: " + "; ".join(report.problems)
+                    + ". Fix the sequences (`wingphoto check LEFT --right RIGHT` shows the full report), "
+                    "or pass force=True (--force) to track them anyway"
+                )
+            for problem in report.problems:
+                log.warning("forced past a failed sequence check: %s", problem)
     tracks = {}
     for cam, frames in (("left", frames_left), ("right", frames_right)):
         ckpt = None if checkpoint_dir is None else Path(checkpoint_dir) / f"checkpoint_{cam}.npz"
-        tracks[cam] = track_folder(frames, tables[cam], camera=cam, checkpoint=ckpt, progress=progress, **options)
+        tracks[cam] = track_folder(frames, tables[cam], camera=cam, checkpoint=ckpt, progress=progress,
+                                   check=False, **options)
     tl, tr = check_stereo(tracks["left"], tracks["right"], rig)
     points = triangulate_tracks(tl, tr, rig)
     return pd.concat([tl, tr], ignore_index=True), points

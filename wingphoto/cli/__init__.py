@@ -20,6 +20,7 @@ __all__ = ["main", "build_parser", "COMMANDS"]
 COMMANDS = (
     "pantilt",
     "calibrate",
+    "check",
     "track",
     "triangulate",
     "batch",

@@ -10,11 +10,14 @@ def add_parser(sub):
         "TIFF). Points the tracker is unsure of are flagged or lost, never guessed; review them in the "
         "tracking notebook.",
     )
-    t.add_argument("--frames", required=True, help="folder, glob pattern or multi-page TIFF of the sequence")
+    t.add_argument("--frames", required=True,
+                   help="folder, glob pattern, multi-page TIFF, Phantom .cine, Photron .mraw/.cih(x) or video file")
     t.add_argument("--picks", required=True, help="picks JSON saved by the picker widget (or data-samples' picks.json)")
     t.add_argument("--camera", default="left", choices=["left", "right"], help="which view's picks to use")
     t.add_argument("--out", required=True, help="output tracks CSV")
     t.add_argument("--checkpoint", default=None, help="checkpoint file: a rerun resumes from it")
+    t.add_argument("--force", action="store_true",
+                   help="track despite a failed sequence check (duplicated frames, stray files; `wingphoto check`)")
     return t
 
 
@@ -22,7 +25,7 @@ def run(args):
     from .. import pipeline
 
     tracks = pipeline.track_folder(args.frames, args.picks, camera=args.camera, out=args.out,
-                                   checkpoint=args.checkpoint)
+                                   checkpoint=args.checkpoint, force=getattr(args, "force", False))
     counts = tracks["status"].value_counts().to_dict()
     print(f"tracked {tracks['point'].nunique()} points over {tracks['frame'].nunique()} frames: {counts}")
     print(f"wrote {args.out}")
