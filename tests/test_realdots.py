@@ -1,0 +1,72 @@
+"""synth.realdots: real dot photographs moved by known warps (skipped without ../shared)."""
+import numpy as np
+import pytest
+
+from wingphoto.synth import realdots
+from wingphoto.synth.realdots import _warp_point
+from wingphoto.validation import score_tracks
+
+
+@pytest.fixture(scope="module")
+def folder():
+    f = realdots.default_folder()
+    if not (f / "cal1.tif").is_file():
+        pytest.skip(f"real-dot photographs not found at {f}")
+    return f
+
+
+@pytest.fixture(scope="module")
+def seq(folder):
+    return realdots.render_realdots("cam2", seed=3, n_frames=12, size=160, folder=folder)
+
+
+def test_missing_folder_and_bad_arguments(tmp_path):
+    with pytest.raises(FileNotFoundError, match="real-dot photographs not found"):
+        realdots.render_realdots("cam1", seed=0, folder=tmp_path)
+    with pytest.raises(ValueError, match="camera must be one of"):
+        realdots.render_realdots("cam3", seed=0, folder=tmp_path)
+    with pytest.raises(ValueError, match="n_frames must be >= 2"):
+        realdots.render_realdots("cam1", seed=0, n_frames=1, folder=tmp_path)
+
+
+def test_truth_is_the_reference_through_the_warp(seq, folder):
+    ref = np.loadtxt(folder / "cam2_cal_points", ndmin=2)[:, :2][seq.params["reference_rows"]]
+    for k in (0, 5, 11):
+        np.testing.assert_allclose(seq.points[k], _warp_point(seq.homographies[k], ref), atol=1e-9)
+    assert seq.images.shape == (12, 160, 160) and seq.images.dtype == np.uint8
+    # it moves: 10-15 px/frame at the view's centre, more or less elsewhere
+    speed = np.linalg.norm(np.diff(seq.points, axis=0), axis=2)
+    assert 5 < np.median(speed) < 25
+    picks = seq.picks("cam2")
+    assert np.array_equal(np.isfinite(picks[:, 0]), seq.visible[0])
+    with pytest.raises(ValueError, match="camera must be 'cam2'"):
+        seq.picks("cam1")
+
+
+def test_dots_sit_at_their_truth(seq):
+    """A local shape centroid of each visible dot agrees with its truth to ~the reference's
+    accuracy (the photograph's dots are ~5 px across and faint)."""
+    errs = []
+    for k in (0, 6):
+        img = seq.images[k].astype(float)
+        for p in seq.points[k][seq.visible[k]]:
+            x0, y0 = int(round(p[0])), int(round(p[1]))
+            win = img[y0 - 5 : y0 + 6, x0 - 5 : x0 + 6]
+            ys, xs = np.mgrid[-5:6, -5:6]
+            bg = np.median(win[np.hypot(xs, ys) > 4])
+            w = np.clip(win - bg, 0, None) * (np.hypot(xs + x0 - p[0], ys + y0 - p[1]) < 3.5)
+            c = np.array([(w * (xs + x0)).sum(), (w * (ys + y0)).sum()]) / w.sum()
+            errs.append(np.hypot(*(c - p)))
+    errs = np.array(errs)
+    assert len(errs) > 10
+    assert np.median(errs) < 0.35 and np.percentile(errs, 90) < 0.8
+
+
+def test_scoring_a_one_camera_sequence(seq):
+    import pandas as pd
+
+    T, N = seq.visible.shape
+    tr = pd.DataFrame({"camera": "cam2", "frame": np.repeat(np.arange(T), N), "point": np.tile(np.arange(N), T),
+                       "x": seq.points[..., 0].ravel() + 0.1, "y": seq.points[..., 1].ravel(), "status": "ok"})
+    s = score_tracks(tr, seq, "cam2")
+    assert s["ok_share"] == 1.0 and s["rms_px"] == pytest.approx(0.1) and s["confident_errors"] == 0
