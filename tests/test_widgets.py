@@ -711,3 +711,92 @@ def test_review_problem_list_highlights_only_the_camera_shown():
     assert r.problem_list.value == (2, 0, "right")
     children = list(r.widget.children)
     assert children.index(r.status) < len(children) - 1  # status above the figure row
+
+
+# --------------------------------------------------------------------------- wingphoto pick (a matplotlib window)
+def _window(tmp_path, **kwargs):
+    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from wingphoto.widgets.window import WindowPicker
+
+    left, right = _frames()
+    fig = Figure(figsize=(8, 4))
+    FigureCanvasAgg(fig)
+    return WindowPicker({"left": left[0], "right": right[0]}, tmp_path / "picks.json", figure=fig, **kwargs)
+
+
+def test_window_picker_same_rules_as_the_notebook_picker(tmp_path):
+    w = _window(tmp_path, n_points=2, half_size=3)
+    w.click("left", 10.0, 5.0)
+    w.click("left", 30.0, 20.0)
+    w.click("left", 45.0, 30.0)  # all placed: refused, nothing moves
+    assert w.state.to_picks("left").tolist() == [[10.0, 5.0], [30.0, 20.0]]
+    assert "all 2 markers are placed in the left view" in w.message
+    w.click("right", 12.0, 6.0)  # the other panel starts at its first missing number
+    w.click("right", 12.2, 6.1)  # the same spot as point 0: refused
+    assert "point 0 is already at" in w.message
+    w.click("right", 31.0, 21.0)
+    assert w.state.is_complete
+    texts = sorted((t.get_text(), t.xy) for t in w.axes["right"].texts)
+    assert texts == [("0", (12.0, 6.0)), ("1", (31.0, 21.0))]
+    w.on_key("s")
+    from wingphoto.picks import load_picks
+
+    assert load_picks(tmp_path / "picks.json", "right")[["x", "y"]].to_numpy().tolist() == [[12.0, 6.0], [31.0, 21.0]]
+
+
+def test_window_picker_drag_moves_and_edge_resizes_one_side(tmp_path):
+    w = _window(tmp_path, half_size=5)
+    w.click("left", 20.0, 20.0)
+    scale = w._screen_per_px("left")
+    w.on_press("left", 21.0, 19.0)  # inside the box: move by the drag
+    w.on_motion(21.0 + 2, 19.0 + 1)
+    w.on_release(21.0 + 4, 19.0 + 3)
+    assert w.state.get("left", 0)[1:3] == (24.0, 23.0)
+    w.on_press("left", 29.0, 23.0)  # the right edge (x = 24 + 5): widen, height kept
+    w.on_release(29.0 + 40 / scale + 2, 23.5)
+    hw, hh = w.state.get("left", 0)[3:5]
+    assert hw == pytest.approx(5.0 + 40 / scale + 2) and hh == 5.0
+    w.on_key("u")
+    w.on_key("u")
+    assert w.state.get("left", 0)[1:5] == (20.0, 20.0, 5.0, 5.0)
+
+
+def test_window_picker_keys_and_zoom(tmp_path):
+    w = _window(tmp_path, half_size=4)
+    w.click("left", 10.0, 10.0)
+    w.on_key("p")
+    assert w.state.current == 0
+    w.on_key("+", camera="left")
+    assert w.state.get("left", 0)[3:5] == (5.0, 5.0)
+    w.on_key("m", camera="left")
+    w.click("left", 40.0, 30.0)
+    assert w.state.get("left", 0)[1:3] == (40.0, 30.0)
+    w.on_key("d", camera="left")
+    assert w.state.numbers("left") == []
+    w.zoom("left", 4.0, 40.0, 30.0)
+    (x0, x1), (y1, y0) = w.axes["left"].get_xlim(), w.axes["left"].get_ylim()
+    assert x1 - x0 == pytest.approx(15.0) and y0 <= 30.0 <= y1
+
+
+def test_cli_pick_without_display_says_how_to_pick(tmp_path, monkeypatch, capsys):
+    import tifffile
+
+    from wingphoto.cli import main
+
+    rng = np.random.default_rng(5)
+    for cam in ("left", "right"):
+        tifffile.imwrite(tmp_path / f"{cam}.tif", rng.integers(0, 255, (4, H, W), dtype=np.uint8),
+                         photometric="minisblack")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "picks.json"
+    code = main(["pick", str(tmp_path / "left.tif"), str(tmp_path / "right.tif"), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 1 and not out.exists()
+    assert "no display" in err and "camera,point,frame,x,y,half_w,half_h" in err and "04_picking_markers" in err
+    assert main(["pick", str(tmp_path / "left.tif"), "--out", str(tmp_path / "p.txt")]) == 1
+    assert "must end in .json or .csv" in capsys.readouterr().err
+    assert main(["pick", str(tmp_path / "left.tif"), "--out", str(out), "--frame", "9"]) == 1
+    assert "--frame 9 is outside" in capsys.readouterr().err

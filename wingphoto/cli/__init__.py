@@ -20,6 +20,7 @@ __all__ = ["main", "build_parser", "COMMANDS"]
 COMMANDS = (
     "pantilt",
     "calibrate",
+    "pick",
     "check",
     "track",
     "triangulate",
@@ -32,6 +33,7 @@ A typical session (folders of TIFF frames, a 9x6 inner-corner board of 30 mm squ
 
   wingphoto calibrate --left calib/left --right calib/right --pattern 9x6 --square 30 \\
       --out results/Calib_Results_stereo.mat
+  wingphoto pick flap/left flap/right --out picks.json    # click the markers (docs/picks.md)
   wingphoto track --frames flap/left --picks picks.json --camera left --out results/tracks_left.csv
   wingphoto track --frames flap/right --picks picks.json --camera right --out results/tracks_right.csv
   wingphoto triangulate --calib results/Calib_Results_stereo.mat \\

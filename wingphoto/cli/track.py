@@ -12,7 +12,9 @@ def add_parser(sub):
     )
     t.add_argument("--frames", required=True,
                    help="folder, glob pattern, multi-page TIFF, Phantom .cine, Photron .mraw/.cih(x) or video file")
-    t.add_argument("--picks", required=True, help="picks JSON saved by the picker widget (or data-samples' picks.json)")
+    t.add_argument("--picks", required=True,
+                   help="picks file: the JSON that `wingphoto pick` or the picker widget saves, or a CSV with "
+                   "columns camera,point,frame,x,y[,half_w,half_h] (px; docs/picks.md, `wingphoto pick --help`)")
     t.add_argument("--camera", default="left", choices=["left", "right"], help="which view's picks to use")
     t.add_argument("--out", required=True, help="output tracks CSV")
     t.add_argument("--checkpoint", default=None, help="checkpoint file: a rerun resumes from it")
