@@ -200,7 +200,14 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
     -------
     stats : pandas.DataFrame
         One row per (condition, pair): condition, i, j, n (finite frames), mean, std,
-        min, max, range (mm) [, nominal, bias, max_error].
+        min, max, range (mm) [, nominal, bias, max_error] [, expected_std].
+        ``expected_std`` (mm) appears when the points carry per-point sigmas
+        (``sigma_X_track`` ... from ``triangulate_tracks(..., calibration=...)``, else
+        ``sigma_X`` ...): the frame-to-frame spread of the length the 2D tracking
+        uncertainty predicts, ``sqrt(mean over frames of u^T (S_i + S_j) u)`` with
+        ``u`` the unit direction i -> j and ``S`` the per-axis variances, to set beside
+        the measured ``std``. (The calibration's part is left out when separable: it
+        biases a length the same way in every frame rather than spreading it.)
 
     Examples
     --------
@@ -227,6 +234,9 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
                 "max": d.max() if n else np.nan,
             }
             row["range"] = row["max"] - row["min"]
+            expected = _expected_length_std(pts, i, j)
+            if expected is not None:
+                row["expected_std"] = expected
             if nominal is not None:
                 row["nominal"] = float(nominal)
                 row["bias"] = row["mean"] - float(nominal)
@@ -235,8 +245,32 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
     columns = ["condition", "i", "j", "n", "mean", "std", "min", "max", "range"]
     if nominal is not None:
         columns += ["nominal", "bias", "max_error"]
+    if any("expected_std" in r for r in rows):
+        columns += ["expected_std"]
     out = pd.DataFrame(rows, columns=columns)
     return out.astype({"i": np.int64, "j": np.int64, "n": np.int64})
+
+
+def _expected_length_std(points, i, j):
+    """RMS over frames of the length sigma predicted by per-point sigmas, or None without them."""
+    if not isinstance(points, pd.DataFrame):
+        return None
+    for tag in ("_track", ""):
+        cols = [f"sigma_{a}{tag}" for a in "XYZ"]
+        if set(cols) <= set(points.columns):
+            break
+    else:
+        return None
+    P, frames, ids = points_to_array(points)
+    sig = points[["frame", "point"] + cols].rename(columns=dict(zip(cols, "XYZ")))
+    S, _, _ = points_to_array(sig, frames=frames, point_ids=ids)
+    a, b = _column(ids, i, "i"), _column(ids, j, "j")
+    d = P[:, a] - P[:, b]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    var = np.sum(u**2 * (S[:, a] ** 2 + S[:, b] ** 2), axis=1)
+    var = var[np.isfinite(var)]
+    return float(np.sqrt(var.mean())) if var.size else np.nan
 
 
 # --------------------------------------------------------------------------- references
@@ -469,32 +503,6 @@ def _unit(v):
     return v / n
 
 
-def _leading_edge_directions(P, cols, root):
-    """Unit root-to-tip direction per frame: principal axis of the leading-edge markers."""
-    T = P.shape[0]
-    D = np.full((T, 3), np.nan)
-    tip = P[:, cols[0]]
-    for t in range(T):
-        pts = P[t, cols]
-        if root is not None:
-            pts = np.vstack([pts, root[t]])
-        pts = pts[np.all(np.isfinite(pts), axis=1)]
-        if len(pts) < 2:
-            continue
-        centred = pts - pts.mean(axis=0)
-        _, s, vt = np.linalg.svd(centred, full_matrices=False)
-        if s[0] < 1e-9:
-            continue
-        d = vt[0]
-        r = root[t] if root is not None else P[t, cols[-1]]
-        centre = pts.mean(axis=0)
-        ref = (tip[t] if np.all(np.isfinite(tip[t])) else centre) - (r if np.all(np.isfinite(r)) else centre)
-        if not np.all(np.isfinite(ref)) or np.linalg.norm(ref) < 1e-12:
-            ref = pts[0] - pts[-1]  # ordered tip first: first seen minus last seen
-        D[t] = d if d @ ref >= 0 else -d
-    return D
-
-
 def stroke_angle(points, leading_edge_ids, *, root_id=None, hinge=None, stroke_plane=None):
     """Stroke angle per frame from the direction of the wing's leading edge.
 
@@ -534,6 +542,8 @@ def stroke_angle(points, leading_edge_ids, *, root_id=None, hinge=None, stroke_p
         elevation     theta = asin(d . n)                (deg, out of the stroke plane)
 
     The sign of a fitted plane is a convention; pass ``stroke_plane`` to fix it.
+    This is the stroke and deviation of :func:`wingphoto.kinematics.wing_kinematics`
+    (which also gives pitch, twist, camber, bending and sigmas; ``docs/kinematics.md``).
 
     Examples
     --------
@@ -544,48 +554,22 @@ def stroke_angle(points, leading_edge_ids, *, root_id=None, hinge=None, stroke_p
     >>> np.round(s.angle_deg, 6).tolist()
     [-30.0, 0.0, 30.0]
     """
-    P, frames, ids, _ = _as_array(points)
+    from .kinematics import wing_kinematics
+
     le = np.asarray(leading_edge_ids, dtype=np.int64).reshape(-1)
     if root_id is None and hinge is None and le.size < 2:
         raise ValueError("give at least two leading_edge_ids, or a root_id or hinge with one leading-edge marker")
     if root_id is not None and hinge is not None:
         raise ValueError("give either root_id (a marker) or hinge (a fixed point), not both")
-    cols = [_column(ids, p, "leading-edge point") for p in le]
-    root = None
-    if root_id is not None:
-        root = P[:, _column(ids, root_id, "root_id")]
-    elif hinge is not None:
-        h = np.asarray(hinge, dtype=np.float64).reshape(-1)
-        if h.shape != (3,) or not np.all(np.isfinite(h)):
-            raise ValueError(f"hinge must be a finite (3,) point in mm, got {hinge!r}")
-        root = np.broadcast_to(h, (P.shape[0], 3))
-    D = _leading_edge_directions(P, cols, root)
-    good = np.all(np.isfinite(D), axis=1)
-    if good.sum() < 2 and stroke_plane is None:
-        raise ValueError("fewer than two frames have a leading-edge direction: cannot fit the stroke plane")
-
-    axis = None
-    if stroke_plane is None:
-        _, _, vt = np.linalg.svd(D[good], full_matrices=False)
-        normal = vt[-1]
-        normal = normal if normal[np.argmax(np.abs(normal))] > 0 else -normal
-    else:
-        sp = stroke_plane
-        if isinstance(sp, (tuple, list)) and len(sp) == 2 and np.ndim(sp[0]) == 1:
-            sp, axis = sp
-        normal = np.asarray(sp, dtype=np.float64).reshape(-1)
-        if normal.shape != (3,):
-            raise ValueError(f"stroke_plane must be a (3,) normal or (normal, axis), got {stroke_plane!r}")
-        normal = _unit(normal)
-    if axis is None:
-        if not good.any():
-            raise ValueError("no frame has a leading-edge direction: cannot choose the zero-angle axis")
-        axis = D[good].mean(axis=0)
-    axis = np.asarray(axis, dtype=np.float64).reshape(3)
-    axis = _unit(axis - (axis @ normal) * normal)
-    e2 = np.cross(normal, axis)
-    angle = np.degrees(np.arctan2(D @ e2, D @ axis))
-    elevation = np.degrees(np.arcsin(np.clip(D @ normal, -1.0, 1.0)))
+    frames = _as_array(points)[1]
+    kin = wing_kinematics(points, leading_edge=le, root=root_id, hinge=hinge, stroke_plane=stroke_plane, sigma=False)
+    angle = kin.loc[kin["quantity"] == "stroke", "value"].to_numpy(np.float64, copy=True)
+    elevation = kin.loc[kin["quantity"] == "deviation", "value"].to_numpy(np.float64, copy=True)
+    normal = np.asarray(kin.attrs["stroke_plane_normal"])
+    axis = np.asarray(kin.attrs["stroke_plane_axis"])
+    phi, theta = np.radians(angle), np.radians(elevation)
+    D = (np.cos(theta) * np.cos(phi))[:, None] * axis + (np.cos(theta) * np.sin(phi))[:, None] * np.cross(normal, axis) \
+        + np.sin(theta)[:, None] * normal
     return StrokeAngle(frames=frames, angle_deg=angle, elevation_deg=elevation, direction=D, normal=normal, axis=axis)
 
 

@@ -21,6 +21,7 @@ sigmas. Definitions, frames and sign conventions: ``docs/kinematics.md``.
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -215,13 +216,15 @@ def _compute(P, lay, *, fix=False):
     # spanwise bending: quadratic term of the leading edge's deflection along the wing normal,
     # as the deflection of the outermost marker from the tangent at the innermost one
     if chord is not None and len(lay.le) >= 3:
-        with np.errstate(invalid="ignore"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames without any chord: NaN
             mean_c = np.nanmean(chord, axis=1)
         nw = _nunit(np.cross(D, mean_c * lay.chord_sign))
         q = P[:, lay.le] - base[:, None, :]
         x = np.sum(q * D[:, None, :], axis=2)
         y = np.sum(q * nw[:, None, :], axis=2)
-        with np.errstate(invalid="ignore"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames without the edge: NaN
             fin = np.isfinite(y)
             span = np.nanmax(np.where(fin, x, np.nan), axis=1) - np.nanmin(np.where(fin, x, np.nan), axis=1)
         out["bending"] = _quad_coef(x, y) * span**2
@@ -315,10 +318,10 @@ def _layout(ids, leading_edge, trailing_edge, chord_rows, root, hinge, span_mm, 
             "per leading-edge station, tip first"
         )
     lay = _Layout(
-        le=[_column(ids, p, "leading-edge point") for p in le],
-        te=[_column(ids, p, "trailing-edge point") for p in te],
-        rows=[[_column(ids, p, "chord_rows point") for p in rw] for rw in (chord_rows or ())],
-        root_col=None if root is None else _column(ids, root, "root"),
+        le=[_column(ids, int(p), "leading-edge point") for p in le],
+        te=[_column(ids, int(p), "trailing-edge point") for p in te],
+        rows=[[_column(ids, int(p), "chord_rows point") for p in rw] for rw in (chord_rows or ())],
+        root_col=None if root is None else _column(ids, int(root), "root"),
         hinge=None,
     )
     if hinge is not None:
@@ -360,8 +363,9 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     span_mm : float, optional
         Wing length; station = radius / span_mm. Default: the station's radius over the
         outermost station's (the outermost is 1).
-    sigma : (T, N, 3) array_like, optional
-        Per-axis 1-sigma of the points (mm), instead of the DataFrame's columns.
+    sigma : (T, N, 3) array_like or False, optional
+        Per-axis 1-sigma of the points (mm), instead of the DataFrame's columns; False
+        skips the propagation (the sigma column is NaN).
 
     Returns
     -------
@@ -405,7 +409,9 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     lay = _layout(ids, leading_edge, trailing_edge, chord_rows, root, hinge, span_mm, stroke_plane, P)
     base = _compute(P, lay, fix=True)
     S = None
-    if sigma is not None:
+    if sigma is False:
+        S = None
+    elif sigma is not None:
         S = np.asarray(sigma, dtype=np.float64)
         if S.shape != P.shape:
             raise ValueError(f"sigma must have the points' shape {P.shape}, got {S.shape}")
@@ -537,7 +543,7 @@ class WingSurface:
         Returns
         -------
         Path
-            The index file (``.pvd`` for ply, else ``<name>.<fmt>.series``).
+            The ParaView index ``<name>.<fmt>.series`` (:func:`wingphoto.io.mesh.write_series`).
         """
         from .io.mesh import write_series
 
