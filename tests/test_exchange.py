@@ -148,3 +148,16 @@ def test_cli_export(tmp_path, sample):
     back = pd.read_parquet(tmp_path / "pq" / "points3d.parquet")
     np.testing.assert_allclose(back[["X", "Y", "Z"]].to_numpy(), read_points_csv(tmp_path / "points.csv")[["X", "Y", "Z"]].to_numpy())
     assert main(["export", "--format", "thesis-mat", "--out", str(tmp_path / "m")]) == 1  # needs inputs
+    meshio = pytest.importorskip("meshio")
+    for fmt, ext in (("ply", "ply"), ("vtk", "vtu")):
+        assert main(["export", "--points", str(tmp_path / "points.csv"), "--format", fmt,
+                     "--out", str(tmp_path / fmt)]) == 0
+        m = meshio.read(tmp_path / fmt / f"points_000003.{ext}")
+        np.testing.assert_allclose(m.points, points[points.frame == 3][["X", "Y", "Z"]].to_numpy())
+        assert (tmp_path / fmt / f"points.{ext}.series").is_file()
+    from wingphoto.io import save_bouguet_stereo
+
+    save_bouguet_stereo(rig, tmp_path / "calib.mat")
+    assert main(["export", "--calib", str(tmp_path / "calib.mat"), "--format", "dlt-coefs",
+                 "--out", str(tmp_path / "dlt")]) == 0
+    assert np.loadtxt(tmp_path / "dlt" / "dltCoefs.csv", delimiter=",").shape == (11, 2)

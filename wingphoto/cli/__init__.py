@@ -24,6 +24,7 @@ COMMANDS = (
     "check",
     "track",
     "triangulate",
+    "export",
     "batch",
     "demo",
 )
