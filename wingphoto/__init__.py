@@ -69,3 +69,14 @@ from .track import (
 from .video import write_tracking_video
 from .pipeline import calibrate_folders, load_picks, run_demo, track_folder, track_stereo, triangulate_files
 from .batch import load_manifest, run_batch
+from .integrity import SequenceReport, SequenceWarning, StereoSequenceReport, check_sequence, check_stereo_sequences
+from .io.exchange import (
+    fit_dlt,
+    read_dltdv,
+    read_parquet,
+    read_thesis_mat,
+    write_dlt_coefficients,
+    write_dltdv,
+    write_parquet,
+    write_thesis_mat,
+)

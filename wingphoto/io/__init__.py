@@ -10,6 +10,10 @@ Three groups of functions, one per kind of file, one module each (``sequence``,
   single camera's ``Calib_Results.mat``, :func:`load_bouguet_stereo` /
   :func:`save_bouguet_stereo` for ``Calib_Results_stereo.mat``, with the toolbox's own
   variable names so MATLAB users can move results back and forth.
+- **Camera files** - ``.cine``, ``.mraw`` and video files open through the same
+  :func:`read_sequence` (one module per format in :mod:`wingphoto.io.formats`).
+- **Exchange** - :mod:`wingphoto.io.exchange`: DLTdv8 files, DLT coefficients, the
+  thesis' MATLAB files and Parquet (``docs/formats.md``).
 - **Tables** - :func:`write_tracks_csv` / :func:`read_tracks_csv` and
   :func:`write_points_csv` / :func:`read_points_csv` round-trip the tracks and 3D points
   DataFrames exactly (dtypes, NaN, empty tables); :func:`empty_tracks` and
@@ -24,6 +28,18 @@ Conventions (pixel origin, frames, units, names): ``docs/conventions.md``.
 from .atomic import atomic_write
 from .bouguet import BouguetCalib, load_bouguet_calib, load_bouguet_stereo, save_bouguet_calib, save_bouguet_stereo
 from .sequence import IMAGE_EXTENSIONS, Sequence, SequenceWarning, parse_numbering, read_sequence
+from .exchange import (
+    DLTFit,
+    fit_dlt,
+    read_dlt_coefficients,
+    read_dltdv,
+    read_parquet,
+    read_thesis_mat,
+    write_dlt_coefficients,
+    write_dltdv,
+    write_parquet,
+    write_thesis_mat,
+)
 from .tables import (
     POINT_COLUMNS,
     TRACK_COLUMNS,
@@ -45,6 +61,17 @@ __all__ = [
     "read_sequence",
     "SequenceWarning",
     "parse_numbering",
+    # exchange (DLTdv8, DLT coefficients, the thesis' .mat files, Parquet)
+    "DLTFit",
+    "fit_dlt",
+    "write_dlt_coefficients",
+    "read_dlt_coefficients",
+    "write_dltdv",
+    "read_dltdv",
+    "write_thesis_mat",
+    "read_thesis_mat",
+    "write_parquet",
+    "read_parquet",
     # Bouguet toolbox
     "BouguetCalib",
     "load_bouguet_calib",
