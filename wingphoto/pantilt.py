@@ -122,6 +122,10 @@ S03N = ServoModel("S03N", 0.6, 1.5, 2.4)
 
 
 # ============================================================== the schedule
+#: Most stops per axis: a schedule holds each step for seconds, so more is a typing mistake.
+_MAX_STOPS = 1000
+
+
 def _widths(values, n, default_range, default_three, name):
     if values is not None:
         w = np.asarray(values, dtype=np.float64).ravel()
@@ -131,6 +135,8 @@ def _widths(values, n, default_range, default_three, name):
     n = int(n)
     if n < 1:
         raise ValueError(f"the number of {name[:-3]} stops must be >= 1, got {n}")
+    if n > _MAX_STOPS:
+        raise ValueError(f"the number of {name[:-3]} stops must be at most {_MAX_STOPS}, got {n}")
     if n == 1:
         return np.array([1.5])
     if default_three is not None and n == 3:
