@@ -201,13 +201,15 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
     stats : pandas.DataFrame
         One row per (condition, pair): condition, i, j, n (finite frames), mean, std,
         min, max, range (mm) [, nominal, bias, max_error] [, expected_std].
-        ``expected_std`` (mm) appears when the points carry per-point sigmas
-        (``sigma_X_track`` ... from ``triangulate_tracks(..., calibration=...)``, else
-        ``sigma_X`` ...): the frame-to-frame spread of the length the 2D tracking
-        uncertainty predicts, ``sqrt(mean over frames of u^T (S_i + S_j) u)`` with
-        ``u`` the unit direction i -> j and ``S`` the per-axis variances, to set beside
-        the measured ``std``. (The calibration's part is left out when separable: it
-        biases a length the same way in every frame rather than spreading it.)
+        ``expected_std`` (mm) appears when the points carry per-point uncertainties
+        (from ``triangulate_tracks(..., calibration=..., full_covariance=True)``): the
+        frame-to-frame spread of the length the 2D tracking uncertainty predicts,
+        ``sqrt(mean over frames of u^T (C_i + C_j) u)`` with ``u`` the unit direction
+        i -> j and ``C`` the tracking-only 3D covariance (``cov_*_track``; else the
+        total ``cov_*``; else the per-axis ``sigma_*`` whose ignored correlations make
+        it approximate), to set beside the measured ``std``. The calibration's part is
+        left out when separable: it biases a length the same way in every frame rather
+        than spreading it.
 
     Examples
     --------
@@ -252,23 +254,26 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
 
 
 def _expected_length_std(points, i, j):
-    """RMS over frames of the length sigma predicted by per-point sigmas, or None without them."""
+    """RMS over frames of the length sigma predicted by per-point covariances, or None without them."""
     if not isinstance(points, pd.DataFrame):
         return None
-    for tag in ("_track", ""):
-        cols = [f"sigma_{a}{tag}" for a in "XYZ"]
-        if set(cols) <= set(points.columns):
-            break
-    else:
+    from .uncertainty import point_covariances
+
+    C, _ = point_covariances(points, part="_track")
+    if C is None:
+        C, _ = point_covariances(points)
+    if C is None:
         return None
     P, frames, ids = points_to_array(points)
-    sig = points[["frame", "point"] + cols].rename(columns=dict(zip(cols, "XYZ")))
-    S, _, _ = points_to_array(sig, frames=frames, point_ids=ids)
+    fi = pd.Index(frames).get_indexer(points["frame"].to_numpy())
+    pi = pd.Index(ids).get_indexer(points["point"].to_numpy())
+    Cs = np.full((len(frames), len(ids), 3, 3), np.nan)
+    Cs[fi, pi] = C
     a, b = _column(ids, i, "i"), _column(ids, j, "j")
     d = P[:, a] - P[:, b]
     with np.errstate(invalid="ignore", divide="ignore"):
         u = d / np.linalg.norm(d, axis=1, keepdims=True)
-    var = np.sum(u**2 * (S[:, a] ** 2 + S[:, b] ** 2), axis=1)
+    var = np.einsum("ti,tij,tj->t", u, Cs[:, a] + Cs[:, b], u)
     var = var[np.isfinite(var)]
     return float(np.sqrt(var.mean())) if var.size else np.nan
 

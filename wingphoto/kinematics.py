@@ -269,39 +269,61 @@ def _quantities(out):
             yield name, out[name]
 
 
-def _sigma_array(points, frames, ids):
-    if not isinstance(points, pd.DataFrame) or not {"sigma_X", "sigma_Y", "sigma_Z"} <= set(points.columns):
+def _cov_array(points, frames, ids):
+    """(T, N, 3, 3) point covariances from a points table's cov_* / sigma_* columns, or None."""
+    from .uncertainty import point_covariances
+
+    if not isinstance(points, pd.DataFrame):
         return None
-    sp = points[["frame", "point", "sigma_X", "sigma_Y", "sigma_Z"]].rename(
-        columns={"sigma_X": "X", "sigma_Y": "Y", "sigma_Z": "Z"})
-    S, _, _ = points_to_array(sp, frames=frames, point_ids=ids)
-    return S
+    C, _ = point_covariances(points)
+    if C is None:
+        return None
+    out = np.full((len(frames), len(ids), 3, 3), np.nan)
+    fi = pd.Index(frames).get_indexer(points["frame"].to_numpy())
+    pi = pd.Index(ids).get_indexer(points["point"].to_numpy())
+    keep = (fi >= 0) & (pi >= 0)
+    out[fi[keep], pi[keep]] = C[keep]
+    return out
 
 
-def _propagate(P, S, lay, base, step=1e-3):
-    """First-order sigma of every quantity from independent per-axis point sigmas ``S``."""
+def _propagate(P, C, lay, base, step=1e-3):
+    """First-order sigma of every quantity from the per-point 3D covariances ``C`` (T, N, 3, 3).
+
+    Points are independent of each other; a point's three axes may be correlated.
+    """
     cols = sorted(set(lay.le) | set(lay.te) | {c for rw in lay.rows for c in rw}
                   | ({lay.root_col} if lay.root_col is not None else set()))
     var = {k: np.zeros_like(np.asarray(v, dtype=float)) for k, v in _quantities(base)}
     unknown = {k: np.zeros(np.shape(v), bool) for k, v in var.items()}
     for j in cols:
+        grads = []
         for a in range(3):
             Pp, Pm = P.copy(), P.copy()
             Pp[:, j, a] += step
             Pm[:, j, a] -= step
             hi, lo = _compute(Pp, lay), _compute(Pm, lay)
-            sig = S[:, j, a]
+            g = {}
             for k in var:
-                g = (np.asarray(hi[k]) - np.asarray(lo[k])) / (2 * step)
+                d = np.asarray(hi[k]) - np.asarray(lo[k])
                 if k in ("stroke", "deviation", "pitch", "twist"):  # wrap-safe angle differences
-                    g = (np.asarray(hi[k]) - np.asarray(lo[k]) + 180.0) % 360.0 - 180.0
-                    g = g / (2 * step)
-                sg = sig if g.ndim == 1 else sig[:, None]
-                nz = np.isfinite(g) & (g != 0)
-                contrib = np.where(nz, g**2 * np.where(np.isfinite(sg), sg, 0.0) ** 2, 0.0)
-                var[k] += contrib
-                unknown[k] |= nz & ~np.isfinite(sg)
-    return {k: np.where(unknown[k] | ~np.isfinite(np.asarray(base[k], float)), np.nan, np.sqrt(v))
+                    d = (d + 180.0) % 360.0 - 180.0
+                g[k] = np.where(np.isfinite(d), d / (2 * step), 0.0)
+            grads.append(g)
+        Cj = C[:, j]  # (T, 3, 3)
+        cfin = np.all(np.isfinite(Cj), axis=(1, 2))
+        Cz = np.where(cfin[:, None, None], Cj, 0.0)
+        for k in var:
+            G = np.stack([grads[a][k] for a in range(3)], axis=-1)  # (T[, S], 3)
+            if G.ndim == 2:
+                contrib = np.einsum("ta,tab,tb->t", G, Cz, G)
+                used = np.any(G != 0, axis=-1)
+                unknown[k] |= used & ~cfin
+            else:
+                contrib = np.einsum("tsa,tab,tsb->ts", G, Cz, G)
+                used = np.any(G != 0, axis=-1)
+                unknown[k] |= used & ~cfin[:, None]
+            var[k] += contrib
+    return {k: np.where(unknown[k] | ~np.isfinite(np.asarray(base[k], float)), np.nan, np.sqrt(np.maximum(v, 0.0)))
             for k, v in var.items()}
 
 
@@ -344,8 +366,10 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     Parameters
     ----------
     points : pandas.DataFrame or (T, N, 3) array_like
-        3D points in mm, left camera frame. A DataFrame with ``sigma_X, sigma_Y,
-        sigma_Z`` columns (1-sigma, mm) gives every value its sigma.
+        3D points in mm, left camera frame. A DataFrame with the 3D covariance columns
+        ``cov_XX`` ... (``triangulate_tracks(..., full_covariance=True)``) or the
+        per-axis ``sigma_X, sigma_Y, sigma_Z`` (1-sigma, mm; correlations then ignored)
+        gives every value its sigma.
     leading_edge : sequence of int
         Leading-edge markers, tip first (at least two, or one with ``root``/``hinge``).
     trailing_edge : sequence of int, optional
@@ -394,7 +418,7 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     ``d x chord``. Bending is the quadratic term of the leading edge's deflection along
     that normal, as a deflection at the outermost marker (mm). The sigma is the
     first-order propagation of the independent per-axis point sigmas, with the stroke
-    plane held fixed.
+    plane held fixed, points independent of each other.
 
     Examples
     --------
@@ -408,16 +432,18 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     P, frames, ids, _ = _as_array(points)
     lay = _layout(ids, leading_edge, trailing_edge, chord_rows, root, hinge, span_mm, stroke_plane, P)
     base = _compute(P, lay, fix=True)
-    S = None
+    C = None
     if sigma is False:
-        S = None
+        C = None
     elif sigma is not None:
         S = np.asarray(sigma, dtype=np.float64)
         if S.shape != P.shape:
             raise ValueError(f"sigma must have the points' shape {P.shape}, got {S.shape}")
+        C = np.zeros(P.shape + (3,))
+        C[..., [0, 1, 2], [0, 1, 2]] = S**2
     elif isinstance(points, pd.DataFrame):
-        S = _sigma_array(points, frames, ids)
-    sig = _propagate(P, S, lay, base) if S is not None else {}
+        C = _cov_array(points, frames, ids)
+    sig = _propagate(P, C, lay, base) if C is not None else {}
     parts = []
     T = len(frames)
     st_le = lay.station

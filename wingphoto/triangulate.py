@@ -117,7 +117,7 @@ def reprojection_error(XL, xL, xR, rig):
 
 
 def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manual", "interpolated"), force=False,
-                       calibration=None, point_sigma_px=None):
+                       calibration=None, point_sigma_px=None, full_covariance=False):
     """Triangulate two tracks DataFrames into the 3D points DataFrame.
 
     Parameters
@@ -141,6 +141,9 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
         errors give a diagonal covariance, with a warning).
     point_sigma_px : float, optional
         2D sigma (px) assumed where the tracks carry none (default 0.1 px).
+    full_covariance : bool
+        With ``calibration``, also add the 3D covariances ``cov_XX`` ... (total and
+        ``_track``), which derived lengths and angles need (the axes are correlated).
 
     Returns
     -------
@@ -195,7 +198,8 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
     if calibration is not None:
         from .uncertainty import add_point_uncertainty
 
-        points = add_point_uncertainty(points, tl, tr, rig, calibration=calibration, point_sigma_px=point_sigma_px)
+        points = add_point_uncertainty(points, tl, tr, rig, calibration=calibration, point_sigma_px=point_sigma_px,
+                                       full=full_covariance)
     return points
 
 

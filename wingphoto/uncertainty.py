@@ -43,12 +43,49 @@ __all__ = [
     "add_point_uncertainty",
     "monte_carlo_errors",
     "DEFAULT_POINT_SIGMA_PX",
+    "COV_NAMES",
+    "point_covariances",
 ]
 
 log = logging.getLogger(__name__)
 
 #: 2D positional uncertainty (1-sigma, px, per axis) assumed where tracks carry no sigma.
 DEFAULT_POINT_SIGMA_PX = 0.1
+#: Names of the six independent entries of a 3D covariance (columns ``cov_XX`` ...).
+COV_NAMES = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
+_COV_INDEX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def point_covariances(points, *, part=""):
+    """(N, 3, 3) covariance of each row of a points table, from its ``cov_*`` or ``sigma_*`` columns.
+
+    Parameters
+    ----------
+    points : pandas.DataFrame
+    part : {"", "_track", "_calib"}
+        Which term: total, tracking only, calibration only.
+
+    Returns
+    -------
+    cov : (N, 3, 3) ndarray or None
+        The full covariance when the six ``cov_XX{part}`` ... columns exist, else the
+        diagonal from ``sigma_X{part}`` ... (correlations unknown), else None.
+    full : bool
+        Whether the correlations are included.
+    """
+    cols = [f"cov_{n}{part}" for n in COV_NAMES]
+    if set(cols) <= set(points.columns):
+        C = np.zeros((len(points), 3, 3))
+        for (i, j), c in zip(_COV_INDEX, cols):
+            C[:, i, j] = C[:, j, i] = points[c].to_numpy(np.float64)
+        return C, True
+    cols = [f"sigma_{a}{part}" for a in "XYZ"]
+    if set(cols) <= set(points.columns):
+        s = points[cols].to_numpy(np.float64)
+        C = np.zeros((len(points), 3, 3))
+        C[:, [0, 1, 2], [0, 1, 2]] = s**2
+        return C, False
+    return None, False
 
 
 def _names():
@@ -297,7 +334,11 @@ def add_point_uncertainty(points, tracks_left, tracks_right, rig, *, calibration
         :data:`DEFAULT_POINT_SIGMA_PX`, 0.1 px; the number used is logged).
     full : bool
         Also add the six covariance entries ``cov_XX, cov_XY, cov_XZ, cov_YY, cov_YZ,
-        cov_ZZ`` (mm^2, total).
+        cov_ZZ`` (mm^2, total) and the same of the tracking term (``cov_XX_track`` ...).
+        A stereo point's error lies mostly along the viewing rays, so its axes are
+        strongly correlated: derived quantities (lengths, angles) are propagated
+        correctly only with these; with the per-axis sigmas alone the correlations are
+        ignored.
 
     Returns
     -------
@@ -329,10 +370,11 @@ def add_point_uncertainty(points, tracks_left, tracks_right, rig, *, calibration
         for i, ax in enumerate("XYZ"):
             out[f"sigma_{ax}{tag}"] = s[:, i]
     if full:
-        for (i, j), name in zip([(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)], ["XX", "XY", "XZ", "YY", "YZ", "ZZ"]):
-            v = res["cov"][:, i, j].copy()
-            v[~finite] = np.nan
-            out[f"cov_{name}"] = v
+        for tag, cov in (("", res["cov"]), ("_track", res["cov_track"])):
+            for (i, j), name in zip(_COV_INDEX, COV_NAMES):
+                v = cov[:, i, j].copy()
+                v[~finite] = np.nan
+                out[f"cov_{name}{tag}"] = v
     cc = res["calibration"]
     out.attrs["uncertainty"] = {
         "calibration": "none" if cc is None else cc.source,
