@@ -29,6 +29,7 @@ from .io import (
     write_points_csv,
     write_tracks_csv,
 )
+from .io.atomic import check_output_path
 from .triangulate import triangulate_tracks
 
 log = logging.getLogger(__name__)
@@ -67,6 +68,8 @@ def calibrate_folders(left, right, pattern_size, square_size, *, out=None, progr
     """
     from .calibrate import calibrate_stereo
 
+    if out is not None:
+        check_output_path(out)  # refuse a folder or FIFO before minutes of work, not after
     seq_l, seq_r = read_sequence(left), read_sequence(right)
     if len(seq_l) != len(seq_r):
         raise ValueError(
@@ -154,6 +157,9 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     """
     from .track import track_markers
 
+    for path in (out, checkpoint):
+        if path is not None:
+            check_output_path(path)  # refuse a folder or FIFO before tracking, not after
     if check:
         seq, _ = _checked(frames, f"{camera} sequence", force=force)
     else:
@@ -260,6 +266,8 @@ def triangulate_files(calib, left, right, *, out=None, force=False):
         The files do not belong together (see :func:`~wingphoto.triangulate.triangulate_tracks`);
         the message names the files.
     """
+    if out is not None:
+        check_output_path(out)
     rig, _ = load_bouguet_stereo(calib)
     tracks_left, tracks_right = read_tracks_csv(left), read_tracks_csv(right)
     try:
