@@ -165,9 +165,9 @@ def test_sequential_batch_matches_truth_and_isolates_the_failure(study, sequenti
     # the corrupt trial is reported, with its stage and the file, and stopped nothing else
     assert list(r.failures["trial"]) == ["corrupt"]
     f = r.failures.iloc[0]
-    assert f["stage"] == "track left"
+    assert f["stage"] == "check sequences"  # the check reads every frame first
     assert "frame_0005.tif" in f["error"]
-    assert f["log"] == ".partial/corrupt/log.txt"
+    assert f["log"].startswith(".cache/checks/check-")  # the shared check of its recordings failed
     assert (r.out / f["log"]).is_file() and "Traceback" in (r.out / f["log"]).read_text()
     assert not (r.out / "trials" / "corrupt").exists()
     # one row per condition and pair, pooled over the condition's trials
@@ -273,7 +273,7 @@ def test_cli_batch(study, sequential, tmp_path, capsys):
     code = cli_main(["batch", str(study["manifest"]), "--out", str(out), "--workers", "1", "--no-progress"])
     text = capsys.readouterr()
     assert code == 1  # a trial failed
-    assert "FAILED corrupt at track left" in text.out
+    assert "FAILED corrupt at check sequences" in text.out
     assert "1 of 4 trial(s) to run (sequential)" in text.err
     assert (out / "summary.csv").read_bytes() == (sequential.out / "summary.csv").read_bytes()
     with pytest.raises(SystemExit):

@@ -218,9 +218,9 @@ def _finished(trial, folder):
 
 
 # ----------------------------------------------------------------------------- engines
-def _sequential(plan, cache_dir, bar):
+def _sequential(plan, cache_dir, check_dir, bar):
     """Run the plan in this process; returns {trial id: record or TrialError}."""
-    calibrations, results = {}, {}
+    calibrations, checks, results = {}, {}, {}
     for t, work, final in plan:
         try:
             key = t.calibration.key()
@@ -231,7 +231,15 @@ def _sequential(plan, cache_dir, bar):
                     calibrations[key] = exc
             if isinstance(calibrations[key], TrialError):
                 raise calibrations[key]
-            check = check_sequences(t, work)
+            pair = (t.left, t.right)
+            if pair not in checks:
+                try:
+                    checks[pair] = check_sequences(t.left, t.right, check_dir)
+                except TrialError as exc:
+                    checks[pair] = exc
+            if isinstance(checks[pair], TrialError):
+                raise checks[pair]
+            check = checks[pair]
             left = track_camera(t, "left", work, check)
             right = track_camera(t, "right", work, check)
             results[t.id] = finish_trial(t, work, final, calibrations[key], left, right, check)
@@ -245,24 +253,30 @@ def _dashboard(client):
     try:
         import bokeh  # noqa: F401  (the dashboard is only served with bokeh installed)
     except ImportError:
-        log.info("no Dask dashboard: install bokeh to get one (pip install bokeh)")
         return None
-    return client.dashboard_link
+    try:
+        return client.dashboard_link
+    except Exception:  # no dashboard (e.g. dashboard_address=None)
+        return None
 
 
-def _distributed(plan, cache_dir, bar, client):
+def _distributed(plan, cache_dir, check_dir, bar, client):
     """Submit the plan to a Dask client; returns {trial id: record or TrialError}."""
     from dask.distributed import as_completed
 
     token = uuid.uuid4().hex[:8]
-    calibrations, finals, futures = {}, {}, []
+    calibrations, checks, finals, futures = {}, {}, {}, []
     for t, work, final in plan:
         key = t.calibration.key()
         if key not in calibrations:
             calibrations[key] = client.submit(calibrate_shared, t.calibration, str(cache_dir),
                                               key=f"calibrate-{key}-{token}", pure=False)
         name = f"{t.id}-{token}"
-        check = client.submit(check_sequences, t, str(work), key=f"check-{name}", pure=False)
+        pair = (t.left, t.right)
+        if pair not in checks:
+            checks[pair] = client.submit(check_sequences, t.left, t.right, str(check_dir),
+                                         key=f"check-{len(checks)}-{token}", pure=False)
+        check = checks[pair]
         left = client.submit(track_camera, t, "left", str(work), check, key=f"track-left-{name}", pure=False)
         right = client.submit(track_camera, t, "right", str(work), check, key=f"track-right-{name}", pure=False)
         fut = client.submit(finish_trial, t, str(work), str(final), calibrations[key], left, right, check,
@@ -281,7 +295,7 @@ def _distributed(plan, cache_dir, bar, client):
             bar.update(1)
             fut.release()
     except BaseException:
-        client.cancel(futures + list(calibrations.values()))
+        client.cancel(futures + list(calibrations.values()) + list(checks.values()))
         raise
     return results
 
@@ -348,6 +362,8 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
     partial.mkdir(exist_ok=True)
     cache_dir = Path(cache).expanduser().resolve() if cache is not None else out / ".cache" / "calibration"
     cache_dir.mkdir(parents=True, exist_ok=True)
+    check_dir = out / ".cache" / "checks"  # logs of the shared sequence checks
+    check_dir.mkdir(parents=True, exist_ok=True)
 
     plan, skipped = [], []
     for t in m.trials:
@@ -372,10 +388,12 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
 
     engine, dashboard, results = "sequential", None, {}
 
-    def say(engine, dashboard):
+    def say(engine, dashboard, dask=True):
         line = f"{len(plan)} of {len(m.trials)} trial(s) to run ({engine})"
         if dashboard:
             line += f"; Dask dashboard: {dashboard}"
+        elif dask:
+            line += "; no Dask dashboard (it needs bokeh: pip install bokeh)"
         (notify or log.info)(line)
 
     bar = tqdm(total=len(m.trials), initial=len(skipped), desc="trials", unit="trial", disable=not progress)
@@ -383,8 +401,8 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
         if not plan:
             pass
         elif scheduler is None and (workers == 1 or (workers is None and (os.cpu_count() or 1) == 1)):
-            say(engine, None)
-            results = _sequential(plan, cache_dir, bar)
+            say(engine, None, dask=False)
+            results = _sequential(plan, cache_dir, check_dir, bar)
         else:
             from dask.distributed import Client, LocalCluster
 
@@ -393,7 +411,7 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
                     engine = f"scheduler {scheduler}"
                     dashboard = _dashboard(client)
                     say(engine, dashboard)
-                    results = _distributed(plan, cache_dir, bar, client)
+                    results = _distributed(plan, cache_dir, check_dir, bar, client)
             else:
                 n = int(workers) if workers is not None else max(1, min(os.cpu_count() or 1, 2 * len(plan)))
                 options = {"n_workers": n, "threads_per_worker": 1, "processes": True, "dashboard_address": ":0"}
@@ -402,7 +420,7 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
                     engine = f"local cluster ({n} workers)"
                     dashboard = _dashboard(client)
                     say(engine, dashboard)
-                    results = _distributed(plan, cache_dir, bar, client)
+                    results = _distributed(plan, cache_dir, check_dir, bar, client)
     finally:
         bar.close()
 
@@ -410,8 +428,10 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
     for t, work, final in plan:
         r = results.get(t.id)
         if isinstance(r, TrialError):
-            failures.append({"trial": t.id, "stage": r.stage, "error": r.message,
-                             "log": (work / "log.txt").relative_to(out).as_posix()})
+            logfile = Path(r.log) if r.log else work / "log.txt"
+            if logfile.is_relative_to(out):
+                logfile = logfile.relative_to(out).as_posix()
+            failures.append({"trial": t.id, "stage": r.stage, "error": r.message, "log": str(logfile)})
     failures = pd.DataFrame(failures, columns=list(FAILURE_COLUMNS))
     trials, summary = summarize_batch(m, out)
     _write_csv(summary, out / "summary.csv")

@@ -50,13 +50,16 @@ class TrialError(Exception):
     stage : str
         ``calibrate``, ``check sequences``, ``track left``, ``track right`` or ``analyse``.
     message : str
-        The original error's type and message; the traceback is in the trial's log.
+        The original error's type and message.
+    log : str, optional
+        The log file holding the traceback (the trial's, or a shared stage's).
     """
 
-    def __init__(self, stage, message):
-        super().__init__(stage, message)
+    def __init__(self, stage, message, log=None):
+        super().__init__(stage, message, log)
         self.stage = stage
         self.message = message
+        self.log = log
 
     def __str__(self):
         return f"{self.stage}: {self.message}"
@@ -126,7 +129,7 @@ def _stage(trial_id, stage, log_path):
         raise
     except Exception as exc:
         _TRIAL_LOG.error("trial %s: %s failed:\n%s", trial_id, stage, traceback.format_exc().rstrip())
-        raise TrialError(stage, f"{type(exc).__name__}: {exc}") from None
+        raise TrialError(stage, f"{type(exc).__name__}: {exc}", str(log_path)) from None
     else:
         timing["wall_s"] = round(time.perf_counter() - t0, 3)
         timing["cpu_s"] = round(time.thread_time() - c0, 3)
@@ -225,38 +228,33 @@ def _open_sequence(trial, camera):
     return seq, numbers
 
 
-def check_sequences(trial, work):
-    """Check the two sequences (duplicates, blanks, jumps, offset) before tracking.
+def check_sequences(left, right, log_dir):
+    """Check a left/right pair of recordings (duplicates, blanks, gaps, jumps, offset).
 
-    Uses :func:`wingphoto.integrity.check_stereo_sequences` when it is available (the
-    step is skipped with a note in the log otherwise). A failed check stops the trial
-    unless the trial sets ``force = true``. Writes ``sequence_check.txt``.
+    Uses :func:`wingphoto.integrity.check_stereo_sequences` on the whole recordings, not
+    only a trial's frame range: a dropped or doubled frame anywhere before the range puts
+    the two views out of step inside it, and the offset estimate needs the motion of many
+    frames. Trials cut from the same recordings share one check. Skipped, with a note,
+    when ``wingphoto.integrity`` is not available.
+
+    Returns
+    -------
+    dict
+        ``ok`` (bool), ``text`` (the report), ``wall_s``, ``cpu_s``. A failed check is
+        not raised here: :func:`track_camera` stops the trial unless it sets ``force``.
     """
-    work = Path(work)
-    out = work / "sequence_check.txt"
-    if out.is_file():
-        return {"skipped": True, "wall_s": 0.0, "cpu_s": 0.0}
-    with _stage(trial.id, "check sequences", work / "log.txt") as timing:
+    key = hashlib.sha256(f"{left}\n{right}".encode()).hexdigest()[:16]
+    with _stage("(shared)", "check sequences", Path(log_dir) / f"check-{key}.log") as timing:
         try:
             from ..integrity import check_stereo_sequences
         except ImportError:
             text = "sequence check skipped: wingphoto.integrity.check_stereo_sequences is not available"
-            _TRIAL_LOG.info(text)
+            ok = True
         else:
-            left, _ = _open_sequence(trial, "left")
-            right, _ = _open_sequence(trial, "right")
             report = check_stereo_sequences(left, right)
-            text = report.summary()
-            if not report.ok:
-                if not trial.force:
-                    raise ValueError(f"the sequence check failed: {text} (fix the sequences, or set "
-                                     "force = true for this trial to go on anyway)")
-                _TRIAL_LOG.warning("sequence check failed, going on (force = true): %s", text)
-        from ..io import atomic_write
-
-        with atomic_write(out, "w") as f:
-            f.write(text.rstrip() + "\n")
-    return {"skipped": False, **timing}
+            text, ok = report.summary(), bool(report.ok)
+        _TRIAL_LOG.info("%s", text)
+    return {"ok": ok, "text": text, **timing}
 
 
 # ----------------------------------------------------------------------------- track
@@ -281,18 +279,41 @@ def _trial_picks(trial, camera):
     return table
 
 
-def track_camera(trial, camera, work, *after):
+def _require_check(trial, check, work):
+    """Stop the trial on a failed sequence check unless it sets force; record the report."""
+    from ..io import atomic_write
+
+    work = Path(work)
+    if not check["ok"] and not trial.force:
+        with _stage(trial.id, "check sequences", work / "log.txt"):
+            _TRIAL_LOG.error("sequence check failed:\n%s", check["text"])
+        raise TrialError("check sequences", f"{check['text'].strip().splitlines()[-1]} (see the trial's log; "
+                         "fix the sequences, or set force = true for this trial to go on anyway)",
+                         str(work / "log.txt"))
+    path = work / "sequence_check.txt"
+    if not path.is_file():
+        with atomic_write(path, "w") as f:
+            f.write(check["text"].rstrip() + "\n" + ("" if check["ok"] else "FAILED; going on (force = true)\n"))
+
+
+def track_camera(trial, camera, work, check):
     """Track one camera's sequence of a trial -> ``tracks_CAMERA.csv`` in the work folder.
 
     Frames are read here from the trial's paths. The tracker checkpoints into the work
     folder, so a killed worker resumes where it stopped. Frame numbers in the written
     table are the sequence's own (``frames = [30, 60]`` gives frames 30-59).
-    ``after`` are results of stages that must finish first (ignored).
+
+    Parameters
+    ----------
+    check : dict
+        Result of :func:`check_sequences` for the trial's recordings; a failed check stops
+        the trial (stage ``check sequences``) unless ``trial.force``.
     """
     from .. import pipeline
     from ..io import write_tracks_csv
 
     work = Path(work)
+    _require_check(trial, check, work)
     out = work / f"tracks_{camera}.csv"
     if out.is_file():
         return {"path": str(out), "skipped": True, "wall_s": 0.0, "cpu_s": 0.0}
@@ -375,7 +396,7 @@ def finish_trial(trial, work, final, calibration, left, right, check=None):
     ----------
     calibration, left, right, check : dict
         Results of :func:`calibrate_shared`, :func:`track_camera` (both cameras) and
-        :func:`check_sequences`.
+        :func:`check_sequences` (shared by the trials of the same recordings).
 
     Returns
     -------
@@ -428,7 +449,7 @@ def finish_trial(trial, work, final, calibration, left, right, check=None):
         "track right": {k: right[k] for k in ("wall_s", "cpu_s")},
         "analyse": dict(timing),
     }
-    record["resumed"] = bool(left.get("skipped") or right.get("skipped") or (check or {}).get("skipped"))
+    record["resumed"] = bool(left.get("skipped") or right.get("skipped"))
     _write_json(work / TRIAL_FILE, record)
     _replace_folder(work, final)
     return record

@@ -40,8 +40,13 @@ def add_parser(sub):
 
 
 def run(args):
+    import logging
+
     from ..batch import run_batch
 
+    if not getattr(args, "verbose", False):
+        # Dask logs every worker start and stop at INFO level; -v shows them
+        logging.getLogger("distributed").setLevel(logging.ERROR)
     if args.scheduler is not None and args.workers is not None:
         raise ValueError("give either --scheduler (an existing cluster) or --workers (a local one), not both")
     result = run_batch(args.manifest, out=args.out, scheduler=args.scheduler, workers=args.workers,
