@@ -95,7 +95,7 @@ class Stitched:
         p = p.assign(bin=b)
         g = p.groupby(["bin", "point"])
         mean = g[["X", "Y", "Z"]].mean()
-        dev = p.join(mean, on=["bin", "point"], rsuffix="_m")
+        dev = p.merge(mean.add_suffix("_m").reset_index(), on=["bin", "point"], how="left")
         d2 = ((dev["X"] - dev["X_m"]) ** 2 + (dev["Y"] - dev["Y_m"]) ** 2 + (dev["Z"] - dev["Z_m"]) ** 2)
         std = np.sqrt(d2.groupby([dev["bin"], dev["point"]]).mean())
         out = mean.assign(std=std, n=g.size(), tests=g["test"].nunique()).reset_index()
@@ -118,6 +118,51 @@ def _rest_positions(P, ids, refs):
     return rest, n
 
 
+def _phase_from_others(phases, angles, frames, errors, n_bins=200):
+    """Phase tests that saw no reversal (a mid-stroke view) against the others' stroke-angle curve.
+
+    The flapping period comes from the phased tests; the unknown phase offset is the one
+    that best matches the test's stroke angles to the phased tests' stroke angle as a
+    function of phase (least squares over the overlapping angles, a grid search).
+    """
+    known = [k for k, p in enumerate(phases) if p is not None]
+    if not known:
+        k = min(errors)
+        raise ValueError(f"test {k}: {errors[k]}") from None
+    rates = [np.median(np.diff(phases[k]) / np.diff(frames[k])) for k in known]
+    period = 1.0 / float(np.median(rates))
+    ph = np.concatenate([np.mod(phases[k], 1.0) for k in known])
+    an = np.concatenate([angles[k] for k in known])
+    ok = np.isfinite(an)
+    b = np.minimum((ph[ok] * n_bins).astype(int), n_bins - 1)
+    ref = np.full(n_bins, np.nan)
+    for i in range(n_bins):
+        v = an[ok][b == i]
+        if v.size:
+            ref[i] = v.mean()
+    for k in errors:
+        a, f = angles[k], np.asarray(frames[k], float)
+        seen = np.isfinite(a)
+        if seen.sum() < 3:
+            raise ValueError(f"test {k}: {errors[k]}") from None
+        best = None
+        for off in np.linspace(0.0, 1.0, 4 * n_bins, endpoint=False):
+            pk = np.mod(f[seen] / period + off, 1.0)
+            r = ref[np.minimum((pk * n_bins).astype(int), n_bins - 1)]
+            m = np.isfinite(r)
+            if m.sum() < max(3, 0.3 * seen.sum()):
+                continue
+            cost = float(np.mean((a[seen][m] - r[m]) ** 2))
+            if best is None or cost < best[0]:
+                best = (cost, off)
+        if best is None:
+            raise ValueError(
+                f"test {k}: {errors[k]} (and its stroke angles do not overlap the other tests' to phase it)"
+            ) from None
+        log.info("test %d saw no stroke reversal: phased against the other tests (rms %.2f deg)", k, np.sqrt(best[0]))
+        phases[k] = f / period + best[1]
+
+
 def stitch_tests(tests, reference_ids, *, phase=None, leading_edge=None, root=None, hinge=None, stroke_plane=None,
                  tol_mm=0.5, stillness_tol_mm=None):
     """Bring several tests into the first test's frame by their static references.
@@ -133,7 +178,9 @@ def stitch_tests(tests, reference_ids, *, phase=None, leading_edge=None, root=No
     phase : sequence of (T_k,) array_like, optional
         Stroke phase (cycles) of every frame of each test (in the order of its sorted
         frames), e.g. from the flapper's trigger. Default: from the stroke angle's
-        reversals (needs ``leading_edge``).
+        reversals (needs ``leading_edge``); a test that sees no reversal (a mid-stroke
+        view) is phased by matching its stroke angles to the other tests' stroke angle
+        over phase, with their flapping period.
     leading_edge : sequence of int, optional
         Leading-edge markers (tip first) for the stroke angle.
     root, hinge, stroke_plane : optional
@@ -246,12 +293,17 @@ def stitch_tests(tests, reference_ids, *, phase=None, leading_edge=None, root=No
             per.append(D)
         normal, axis = _stroke_frame(np.concatenate(dirs), stroke_plane)
         e2 = np.cross(normal, axis)
+        angles, errors = [], {}
         for k, D in enumerate(per):
             angle = np.degrees(np.arctan2(D @ e2, D @ axis))
+            angles.append(angle)
             try:
                 phases.append(stroke_phase(angle, arrays[k][1]))
             except ValueError as exc:
-                raise ValueError(f"test {k}: {exc}") from None
+                phases.append(None)
+                errors[k] = exc
+        if errors:
+            _phase_from_others(phases, angles, [a[1] for a in arrays], errors)
     for k, part in enumerate(parts):
         if phases:
             lut = pd.Series(phases[k], index=arrays[k][1])

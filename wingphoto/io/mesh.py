@@ -10,7 +10,8 @@
   dialog.
 
 The format follows the file's suffix: ``.ply`` (binary PLY), ``.vtu`` (VTK XML
-unstructured grid), ``.vtp`` (VTK XML polydata) or ``.vtk`` (legacy VTK). Coordinates
+unstructured grid), ``.vtp`` (VTK XML polydata, ASCII, written here: meshio has no .vtp
+writer) or ``.vtk`` (legacy VTK). Coordinates
 are written as given (mm, left camera frame for wingphoto's 3D points); NaN vertices
 are not allowed in a surface (drop the frame) and are dropped from a point cloud.
 Every file is written atomically (:func:`wingphoto.io.atomic_write`).
@@ -62,11 +63,52 @@ def _point_data(point_data, n, where):
     return out
 
 
+def _vtp_text(points, cells, point_data):
+    """VTK XML PolyData (ASCII) of vertices or triangles: meshio does not write .vtp."""
+    n = len(points)
+    kind, conn = cells
+    conn = np.asarray(conn, dtype=np.int64)
+    k = conn.shape[1] if conn.size else (1 if kind == "vertex" else 3)
+    tag = "Verts" if kind == "vertex" else "Polys"
+    nv, npoly = (len(conn), 0) if tag == "Verts" else (0, len(conn))
+
+    def arr(a):
+        return " ".join(repr(float(v)) for v in np.ravel(a))
+
+    def iarr(a):
+        return " ".join(str(int(v)) for v in np.ravel(a))
+
+    pd_xml = "".join(
+        f'        <DataArray type="Float64" Name="{name}" NumberOfComponents="{1 if np.ndim(v) == 1 else np.shape(v)[1]}" '
+        f'format="ascii">{arr(v)}</DataArray>\n'
+        for name, v in point_data.items()
+    )
+    return (
+        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n  <PolyData>\n'
+        f'    <Piece NumberOfPoints="{n}" NumberOfVerts="{nv}" NumberOfLines="0" NumberOfStrips="0" '
+        f'NumberOfPolys="{npoly}">\n'
+        f"      <PointData>\n{pd_xml}      </PointData>\n"
+        f'      <Points>\n        <DataArray type="Float64" NumberOfComponents="3" format="ascii">{arr(points)}'
+        "</DataArray>\n      </Points>\n"
+        f"      <{tag}>\n"
+        f'        <DataArray type="Int64" Name="connectivity" format="ascii">{iarr(conn)}</DataArray>\n'
+        f'        <DataArray type="Int64" Name="offsets" format="ascii">{iarr(np.arange(1, len(conn) + 1) * k)}'
+        "</DataArray>\n"
+        f"      </{tag}>\n    </Piece>\n  </PolyData>\n</VTKFile>\n"
+    )
+
+
 def _write(mesh, path):
     """Write a meshio mesh through a temporary file, then replace ``path`` atomically."""
-    meshio = _meshio()
     path = Path(path)
     fmt = _format(path)
+    if fmt == "vtp":
+        cell = mesh.cells[0]
+        text = _vtp_text(mesh.points, (cell.type, cell.data), mesh.point_data)
+        with atomic_write(path, "w") as f:
+            f.write(text)
+        return path
+    meshio = _meshio()
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)
