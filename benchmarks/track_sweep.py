@@ -24,7 +24,8 @@ per scenario (pooled over seeds and cameras):
 Then the thesis baseline (``wingphoto.track_thesis``) on the first seed of
 ``clean_glare`` (``--thesis-frames`` frames) for comparison. Writes the table to
 ``--csv`` (default ``benchmarks/track_sweep_<set>.csv``). Exits 1 if any ok point is
-more than 1 px from the truth. Tune on ``--set dev``; report ``--set test``.
+more than 1 px from the truth or if tracking crashed on any sequence (a crash is
+reported and scored as nothing ok). Tune on ``--set dev``; report ``--set test``.
 """
 from __future__ import annotations
 
@@ -115,13 +116,20 @@ def main(argv=None):
            f"{'conf':>5s} {'<=3sig':>6s} {'med e/s':>7s} {'fps':>6s} {'(CPU)':>6s}")
     print(hdr)
     rows = []
+    crashes = []
     for name in args.scenarios:
         pooled = {k: [] for k in ("error", "ok", "visible", "sigma", "ok_pk", "vis_pk")}
         rates, crates, n_seq, worst_seq = [], [], 0, ""
         for _, seed, seq, cams in _sequences([name], rseeds if name in real_names else seeds, args.frames, real):
             for cam in cams:
                 picks = seq.picks(cam)
-                tr, fps, cfps = _track(seq.frames(cam), picks, cam)
+                try:
+                    tr, fps, cfps = _track(seq.frames(cam), picks, cam)
+                except Exception as exc:  # a crash is a result: counted, reported, exit status 1
+                    crashes.append(f"{name} seed {seed} {cam}: {type(exc).__name__}: {exc}")
+                    print(f"    CRASH {crashes[-1]}", flush=True)
+                    tr = pd.DataFrame({"camera": [], "frame": [], "point": [], "x": [], "y": [], "status": []})
+                    fps = cfps = np.nan
                 rates.append(fps)
                 crates.append(cfps)
                 a = point_errors(tr, seq, cam)
@@ -141,8 +149,9 @@ def main(argv=None):
         s = summarize_errors(cat["error"], cat["ok"], cat["visible"], cat["sigma"])
         vis_pk = cat["vis_pk"].sum()
         s["ok_share_picked"] = (cat["ok_pk"] & cat["vis_pk"]).sum() / vis_pk if vis_pk else np.nan
-        s["fps"] = float(np.median(rates))
-        s["fps_cpu"] = float(np.median(crates))
+        s["fps"] = float(np.nanmedian(rates)) if np.isfinite(rates).any() else np.nan
+        s["fps_cpu"] = float(np.nanmedian(crates)) if np.isfinite(crates).any() else np.nan
+        s["crashes"] = int(np.isnan(rates).sum())
         s.update(scenario=name, n_sequences=n_seq, set=args.set)
         rows.append(s)
         print(f"{name:18s} {n_seq:4d} {s['ok_share']:6.3f} {s['ok_share_picked']:6.3f} {s['rms_px']:6.3f} "
@@ -181,8 +190,10 @@ def main(argv=None):
             pd.DataFrame(rows).to_csv(fh, index=False)
         print(f"table written to {out}")
     bad = sum(r["confident_errors"] for r in rows if not r["scenario"].startswith("thesis"))
-    print(f"confident errors (ok > 1 px) over all scenarios: {bad}")
-    return 1 if bad else 0
+    print(f"confident errors (ok > 1 px) over all scenarios: {bad}; crashed runs: {len(crashes)}")
+    for c in crashes:
+        print(f"  crash: {c}")
+    return 1 if bad or crashes else 0
 
 
 if __name__ == "__main__":
