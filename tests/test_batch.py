@@ -20,6 +20,7 @@ from wingphoto.batch import load_manifest, run_batch
 from wingphoto.cli import main as cli_main
 
 SAMPLES = Path(__file__).resolve().parents[1] / "data-samples"
+CALIB = SAMPLES / "calibration"  # 11 of its 21 pairs (odd numbers) in the test manifest
 PAIRS = [(18, 19), (20, 21), (22, 23), (24, 25)]
 TABLES = ("summary.csv", "trials.csv", "failures.csv")
 TRIAL_FILES = ("tracks.csv", "points3d.csv", "lengths.csv")
@@ -40,7 +41,8 @@ name = "test batch"
 group_by = ["condition"]
 
 [defaults]
-calibration = {{left = "{SAMPLES}/calibration/left/calib_*[13579].tif", right = "{SAMPLES}/calibration/right/calib_*[13579].tif", pattern_size = [9, 6], square_size = 8.0}}
+calibration = {{left = "{CALIB}/left/calib_*[13579].tif", right = "{CALIB}/right/calib_*[13579].tif",
+               pattern_size = [9, 6], square_size = 8.0}}
 left = "{SAMPLES}/flapping/left"
 right = "{SAMPLES}/flapping/right"
 picks = "{SAMPLES}/flapping/picks.json"

@@ -34,9 +34,10 @@ import hashlib
 import json
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import tomllib
 
 __all__ = ["CalibrationSpec", "TrialSpec", "Manifest", "load_manifest", "TRIAL_KEYS"]
 
@@ -209,7 +210,8 @@ def _calibration(value, base, source):
         raise ValueError(f"{where}: unknown key(s) {unknown}; known keys: {list(CALIBRATION_KEYS)}")
     missing = [k for k in ("left", "right", "pattern_size", "square_size") if k not in value]
     if missing:
-        raise ValueError(f"{where}: missing {missing} (calibration folders need left, right, pattern_size, square_size)")
+        raise ValueError(f"{where}: missing {missing} "
+                         "(calibration folders need left, right, pattern_size, square_size)")
     ps = value["pattern_size"]
     if (not isinstance(ps, list) or len(ps) != 2
             or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 2 for v in ps)):
@@ -355,7 +357,8 @@ def load_manifest(path):
         raise ValueError(f"{path}: [defaults] must be a table")
     bad = sorted(set(defaults) - set(TRIAL_KEYS) | ({"id"} & set(defaults)))
     if bad:
-        raise ValueError(f"{path}: [defaults] has key(s) {bad} that cannot be shared; known keys: {list(TRIAL_KEYS[1:])}")
+        raise ValueError(f"{path}: [defaults] has key(s) {bad} that cannot be shared; "
+                         f"known keys: {list(TRIAL_KEYS[1:])}")
     raws = doc.get("trial", [])
     if not isinstance(raws, list) or not raws:
         raise ValueError(f"{path}: no trials; add one [[trial]] table per trial (see docs/batch.md)")

@@ -30,8 +30,7 @@ import numpy as np
 import pandas as pd
 
 from .manifest import Manifest, load_manifest
-from .steps import (TRIAL_FILE, TrialError, calibrate_shared, check_sequences, finish_trial,
-                    track_camera)
+from .steps import TRIAL_FILE, TrialError, calibrate_shared, check_sequences, finish_trial, track_camera
 
 __all__ = ["run_batch", "BatchResult", "summarize_batch", "SUMMARY_COLUMNS", "FAILURE_COLUMNS"]
 
@@ -289,7 +288,9 @@ def _distributed(plan, cache_dir, check_dir, bar, client):
             tid = finals[fut.key]
             if fut.status == "error":
                 exc = fut.exception()
-                results[tid] = exc if isinstance(exc, TrialError) else TrialError("dask", f"{type(exc).__name__}: {exc}")
+                if not isinstance(exc, TrialError):  # the cluster itself failed (a worker died ...)
+                    exc = TrialError("dask", f"{type(exc).__name__}: {exc}")
+                results[tid] = exc
             else:
                 results[tid] = fut.result()
             bar.update(1)

@@ -403,8 +403,7 @@ def finish_trial(trial, work, final, calibration, left, right, check=None):
     dict
         The contents of ``trial.json``.
     """
-    from ..io import (atomic_write, load_bouguet_stereo, read_tracks_csv, write_points_csv,
-                      write_tracks_csv)
+    from ..io import atomic_write, load_bouguet_stereo, read_tracks_csv, write_points_csv, write_tracks_csv
     from ..track import check_stereo
     from ..triangulate import triangulate_tracks
 
@@ -434,7 +433,7 @@ def finish_trial(trial, work, final, calibration, left, right, check=None):
             "spec": trial.to_dict(),
             "n_frames": int(tracks["frame"].nunique()),
             "n_points": int(tracks["point"].nunique()),
-            "n_observations": int(len(tracks)),
+            "n_observations": len(tracks),
             "n_ok": int((status == "ok").sum()),
             "status_counts": {k: int(v) for k, v in status.value_counts().sort_index().items()},
             "calibration": {k: calibration[k] for k in ("mat", "key", "cached")},
