@@ -119,8 +119,11 @@ def write_tracking_video(frames, tracks, path, *, fps=30, scale=2, camera=None, 
     scale = int(scale)
     if scale < 1:
         raise ValueError(f"scale must be a positive integer, got {scale}")
-    if not fps > 0:
+    if not (fps > 0 and np.isfinite(fps)):
         raise ValueError(f"fps must be positive, got {fps}")
+    from .io.atomic import check_output_path
+
+    check_output_path(path)  # a folder, FIFO or device is refused, never replaced
     n = len(frames)
     if n == 0:
         raise ValueError("frames is empty: nothing to write")
@@ -146,6 +149,9 @@ def write_tracking_video(frames, tracks, path, *, fps=30, scale=2, camera=None, 
         lo, hi = (float(v) for v in np.percentile(f0, [0.1, 99.9]))
     H, W = f0.shape[:2]
     size = (W * scale, H * scale)
+    if max(size) > 16384:
+        raise ValueError(f"scale={scale} makes {W}x{H} frames {size[0]}x{size[1]} px, more than video codecs "
+                         f"take (16384 px); use scale <= {max(1, 16384 // max(W, H))}")
     writer, out, tmp = _open_writer(path, fps, size)
     arm = max(3, 2 * scale)
     done = False
