@@ -1,5 +1,8 @@
 """Calibration checks: the rig covariance, refusals of bad pairs, cross-validation."""
+import dataclasses
 import functools
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,23 +15,35 @@ PATTERN = (9, 6)
 SQUARE = 8.0
 
 
-def _pan_tilt_corners(seed, sigma=0.1):
-    """Noisy true corners of the 21 pan-tilt poses of a thesis rig (no rendering)."""
-    rig = synth.thesis_rig(seed=seed, jitter=1.0)
+def _poses(rig, n_tilts=3, n_pans=7):
+    """Board -> left camera poses of synth's pan-tilt schedule (raster order)."""
     S, axes = synth.scene_frame(rig)
     centre = np.array([(PATTERN[0] - 1) / 2, (PATTERN[1] - 1) / 2, 0.0]) * SQUARE
-    X = board_points(PATTERN, SQUARE)
-    rng = np.random.default_rng(500 + seed)
-    cl, cr = [], []
-    for tilt, pan in synth.pan_tilt_schedule(3, 7):
+    out = []
+    for tilt, pan in synth.pan_tilt_schedule(n_tilts, n_pans):
         t, p = np.radians(tilt), np.radians(pan)
         Ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
         Rx = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
         Rb = axes @ Ry @ Rx
-        xl, xr = rig.project(X @ Rb.T + (S - Rb @ centre))
+        out.append((Rb, S - Rb @ centre))
+    return out
+
+
+def _corners_of(rig, sigma, seed, n_tilts=3, n_pans=7):
+    X = board_points(PATTERN, SQUARE)
+    rng = np.random.default_rng(seed)
+    cl, cr = [], []
+    for Rb, Tb in _poses(rig, n_tilts, n_pans):
+        xl, xr = rig.project(X @ Rb.T + Tb)
         cl.append(xl + rng.normal(0, sigma, xl.shape))
         cr.append(xr + rng.normal(0, sigma, xr.shape))
-    return rig, cl, cr
+    return cl, cr
+
+
+def _pan_tilt_corners(seed, sigma=0.1, n_pans=4):
+    """Noisy true corners of 3 x n_pans pan-tilt poses of a thesis rig (no rendering)."""
+    rig = synth.thesis_rig(seed=seed, jitter=1.0)
+    return (rig, *_corners_of(rig, sigma, 500 + seed, 3, n_pans))
 
 
 @functools.lru_cache(maxsize=None)
@@ -64,12 +79,12 @@ def test_covariance_matches_the_reported_uncertainty_and_names():
 def test_covariance_is_honest_mahalanobis_over_rigs():
     """The joint error of (om, T) against the truth is chi-square with 6 dof under the covariance."""
     d2 = []
-    for seed in range(6):
+    for seed in range(5):
         rig, st = _calibrated(seed)
         k = [st.parameter_names.index(n) for n in ("om[0]", "om[1]", "om[2]", "T[0]", "T[1]", "T[2]")]
         e = np.concatenate([st.rig.om - rig.om, st.rig.T - rig.T])
         d2.append(e @ np.linalg.solve(st.covariance[np.ix_(k, k)], e))
-    # mean of chi2(6) is 6; over 6 rigs (36 dof) the mean lies in [2.5, 11] with > 99 % probability
+    # mean of chi2(6) is 6; over 5 rigs (30 dof) the mean lies in [2.5, 11] with > 99 % probability
     assert 2.5 < np.mean(d2) < 11.0, d2
 
 
@@ -80,3 +95,106 @@ def test_covariance_with_fixed_aspect_ratio_repeats_fc0():
     np.testing.assert_array_equal(C[0], C[1])
     np.testing.assert_array_equal(C[10], C[11])
     np.testing.assert_allclose(3 * np.sqrt(C[1, 1]), st.uncertainty["fc_left"][1], rtol=1e-12)
+
+
+# ------------------------------------------------------------------ refusals of bad pairs
+def _sample_corners(sigma=0.05, seed=0):
+    """Noisy true corners of 3 x 5 pan-tilt pairs of data-samples' rig (raster order, as data-samples)."""
+    rig = synth.load_rig(Path(__file__).resolve().parents[1] / "data-samples" / "rig.json")
+    cl, cr = _corners_of(rig, sigma, seed, 3, 5)
+    return cl, cr, dict(image_size=(512, 512), names=[f"calib_{i + 1:02d}" for i in range(len(cl))])
+
+
+@functools.lru_cache(maxsize=None)
+def _good_sample_calibration():
+    cl, cr, kw = _sample_corners()
+    return calibrate_stereo(cl, cr, PATTERN, SQUARE, **kw)
+
+
+def test_identical_left_and_right_are_refused():
+    cl, _, kw = _sample_corners()
+    with pytest.raises(ValueError, match="identical in all 15 pairs .*same folder or files given for both cameras"):
+        calibrate_stereo(cl, [c.copy() for c in cl], PATTERN, SQUARE, **kw)
+
+
+def test_single_identical_pair_is_rejected_by_name():
+    cl, cr, kw = _sample_corners()
+    cr[4] = cl[4].copy()
+    st = calibrate_stereo(cl, cr, PATTERN, SQUARE, **kw)
+    assert "identical" in st.rejected["calib_05"] and st.used.sum() == 14
+    assert not st.mono_right.used[4]  # the copied left view does not spoil the right camera
+
+
+def test_good_pairs_all_consistent():
+    st = _good_sample_calibration()
+    chk = st.pair_check
+    assert st.used.all() and chk.offset == 0 and chk.message == "" and chk.inconsistent == []
+    assert chk.table["error_px"].max() < 0.5 and chk.tolerance_px == pytest.approx(1.0)
+    # each pair's own rig pose is the truth's within a few mm
+    rig = synth.load_rig(Path(__file__).resolve().parents[1] / "data-samples" / "rig.json")
+    T = chk.table[["T0", "T1", "T2"]].to_numpy()
+    assert np.abs(T - rig.T).max() < 5.0
+
+
+@pytest.mark.parametrize("shift, expect", [(1, -1), (-1, 1), (2, -2)])
+def test_constant_offset_is_diagnosed_with_the_fix(shift, expect):
+    """Right image i+shift named i: most pairs still agree on a wrong rig; the offset is found."""
+    cl, cr, kw = _sample_corners()
+    cr = cr[shift:] + cr[:shift]
+    msg = re.escape(f"out of sync by {expect:+d}: left image i matches right image i{expect:+d}")
+    with pytest.raises(ValueError, match=msg + r".*Fix: pair left image i with right image .*force=True"):
+        calibrate_stereo(cl, cr, PATTERN, SQUARE, **kw)
+    forced = calibrate_stereo(cl, cr, PATTERN, SQUARE, force=True, **kw)
+    assert forced.pair_check.offset == expect
+    # what the toolbox would have returned: a tiny pixel error but a wrong rig
+    good = _good_sample_calibration()
+    assert np.all(forced.pixel_error < 0.1)
+    assert np.linalg.norm(forced.rig.T - good.rig.T) > 20.0
+
+
+def test_single_wrong_pair_is_rejected_by_name():
+    cl, cr, kw = _sample_corners()
+    cr[5] = cr[6]  # the next pose's right image
+    st = calibrate_stereo(cl, cr, PATTERN, SQUARE, **kw)
+    assert st.pair_check.offset == 0
+    assert st.pair_check.inconsistent == ["calib_06"]
+    assert "inconsistent with the other pairs" in st.rejected["calib_06"] and st.used.sum() == 14
+    assert np.all(np.abs(st.rig.T - _good_sample_calibration().rig.T) < st.uncertainty["T"])
+
+
+def test_unpaired_images_are_refused():
+    cl, cr, kw = _sample_corners()
+    rng = np.random.default_rng(3)
+    cr = [cr[k] for k in rng.permutation(len(cr))]
+    with pytest.raises(ValueError, match="pairs agree on the rig pose|out of sync"):
+        calibrate_stereo(cl, cr, PATTERN, SQUARE, **kw)
+
+
+# ------------------------------------------------------------------ cross-validation
+def test_cross_validation_agrees_for_a_good_calibration():
+    from wingphoto.calibcheck import cross_validate
+
+    cv = cross_validate(_good_sample_calibration())
+    assert len(cv.halves[0]) == 8 and len(cv.halves[1]) == 7
+    assert set(cv.halves[0]).isdisjoint(cv.halves[1])
+    assert cv.ok and 0.3 < cv.ratio("left") < 2.0 and 0.3 < cv.ratio("right") < 2.0
+    assert "agree within their uncertainty" in cv.summary()
+
+
+def test_cross_validation_flags_halves_that_disagree_beyond_their_uncertainty(monkeypatch):
+    """If the halves' uncertainties were 100x smaller, the same differences must be flagged."""
+    from wingphoto import calibcheck
+
+    real = calibcheck._projection_covariance
+
+    def shrunk(p, C, XL):
+        cl, cr = real(p, C, XL)
+        return cl * 1e-4, cr * 1e-4
+
+    monkeypatch.setattr(calibcheck, "_projection_covariance", shrunk)
+    cv = calibcheck.cross_validate(_good_sample_calibration(), split="halves")
+    assert len(cv.halves[0]) == 8 and cv.halves[0][0] == "calib_01" and cv.halves[1][0] == "calib_09"
+    assert not cv.ok and min(cv.ratio("left"), cv.ratio("right")) > 5
+    assert "disagree" in cv.summary()
+    with pytest.raises(ValueError, match="split must be"):
+        calibcheck.cross_validate(_good_sample_calibration(), split="random")

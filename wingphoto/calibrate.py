@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from .camera import Camera, StereoRig, rodrigues, rodrigues_inverse
+from .camera import Camera, StereoRig, rodrigues
 
 __all__ = [
     "CornerDetection",
@@ -1383,6 +1383,9 @@ class StereoCalibration:
         The 26 names of the rows of :attr:`covariance` (:data:`RIG_PARAMETER_NAMES`),
         e.g. ``"fc_left[0]"``, ``"alpha_c_right"``, ``"om[2]"``, ``"T[0]"`` (the row
         labels of :meth:`compare`).
+    pair_check : wingphoto.calibcheck.PairCheck
+        Each pair's own rig pose and its consistency with the others, and the pairing
+        offset diagnosis (:func:`wingphoto.calibcheck.check_pairs`).
     """
 
     rig: StereoRig
@@ -1409,6 +1412,7 @@ class StereoCalibration:
     square_size: tuple
     covariance: np.ndarray | None = field(default=None, repr=False)
     parameter_names: tuple = RIG_PARAMETER_NAMES
+    pair_check: object = field(default=None, repr=False)
     _inputs: dict = field(repr=False, default_factory=dict)
 
     def parameter_sigma(self):
@@ -1639,19 +1643,33 @@ def _refine_rig_pose(om0, T0, mono_l, cam_r, obs_r, objs, used):
 
 def _stereo_from_views(
     views_l, views_r, boards, size_l, size_r, est_l, est_r, pattern_size, square_size,
-    threshold, pair_names, suppressed=(), locking=True,
+    threshold, pair_names, suppressed=(), locking=True, force=False, max_offset=3,
 ):
+    from .calibcheck import check_pairs, identical_pairs
+
     P = len(boards)
     views_l = [dataclasses.replace(v) for v in views_l]
     views_r = [dataclasses.replace(v) for v in views_r]
-    # single-camera calibrations on every view each camera saw (suppressed pairs excluded)
+    # the same image given as left and right (e.g. one folder passed twice)
+    same = [i for i in identical_pairs([v.corners for v in views_l], [v.corners for v in views_r])
+            if i not in suppressed]
+    both = [i for i in range(P) if i not in suppressed and views_l[i].corners is not None
+            and views_r[i].corners is not None]
+    if len(both) < _MIN_VIEWS:  # too few pairs anyway: the counting errors below say why
+        same = []
+    if same and len(same) == len(both):
+        raise ValueError(
+            f"the left and right images are identical in all {len(same)} pairs with the board in both "
+            "(the same folder or files given for both cameras?); give each camera's own images"
+        )
+    # single-camera calibrations on every view each camera saw (suppressed and identical pairs excluded)
     mono_l = _calibrate_from_views(
-        views_l, boards, size_l, est_l, pattern_size, square_size, suppressed, what="left-camera views",
-        locking=locking,
+        views_l, boards, size_l, est_l, pattern_size, square_size, set(suppressed) | set(same),
+        what="left-camera views", locking=locking,
     )
     mono_r = _calibrate_from_views(
-        views_r, boards, size_r, est_r, pattern_size, square_size, suppressed, what="right-camera views",
-        locking=locking,
+        views_r, boards, size_r, est_r, pattern_size, square_size, set(suppressed) | set(same),
+        what="right-camera views", locking=locking,
     )
     # the corners as each camera's calibration used them (pixel-locking corrected)
     obs_l, obs_r = mono_l.corners, mono_r.corners
@@ -1659,6 +1677,9 @@ def _stereo_from_views(
     for i in range(P):
         if i in suppressed:
             reasons[i] = "suppressed by the user"
+            continue
+        if i in same:
+            reasons[i] = "left and right images identical (the same image given for both cameras)"
             continue
         bad = []
         for side, mono in (("left", mono_l), ("right", mono_r)):
@@ -1672,16 +1693,24 @@ def _stereo_from_views(
             "no pair has the board in both images. Rejected: "
             + "; ".join(f"{pair_names[i]}: {reasons[i]}" for i in range(P))
         )
-    # stereo pose from the median of the per-pair relative poses (the toolbox's init)
-    oms, Ts = [], []
-    for i in cand:
-        Rl, Rr = rodrigues(mono_l.omc[i]), rodrigues(mono_r.omc[i])
-        Ri = Rr @ Rl.T
-        oms.append(rodrigues_inverse(Ri))
-        Ts.append(mono_r.Tc[i] - Ri @ mono_l.Tc[i])
-    om0 = np.median(np.array(oms), axis=0)
-    T0 = np.median(np.array(Ts), axis=0)
-    # inconsistent pairs (the toolbox's threshold on the initial errors)
+    # stereo pose from the median of the per-pair relative poses (the toolbox's init), each
+    # pair's consistency with it, and the diagnosis of pairs out of sync (wingphoto.calibcheck)
+    check = check_pairs(mono_l, mono_r, boards, obs_r, cand, pair_names, max_offset=max_offset)
+    if check.offset != 0:
+        if not force:
+            raise ValueError(check.message + "; or pass force=True (--force) to calibrate the pairs as given")
+        logger.warning("%s (calibrating the pairs as given: force=True)", check.message)
+    n_ok = int(check.table["consistent"].sum())
+    if check.offset == 0 and n_ok < 0.5 * len(cand):
+        msg = (f"only {n_ok} of {len(cand)} pairs agree on the rig pose: the left and right images do not look "
+               "like simultaneous pairs (wrong order, different sessions, or a moving board)")
+        if not force:
+            raise ValueError(msg + "; pass force=True (--force) to calibrate the agreeing pairs anyway")
+        logger.warning("%s (force=True)", msg)
+    om0, T0 = check.om, check.T
+    consistent = dict(zip(check.table["pair"], check.table["consistent"]))
+    err_px = dict(zip(check.table["pair"], check.table["error_px"]))
+    # inconsistent pairs: the toolbox's threshold on the initial errors, then the consistency check
     Rs = rodrigues(om0)
     cam_r = mono_r.camera
     used = []
@@ -1693,6 +1722,12 @@ def _stereo_from_views(
             reasons[i] = (
                 f"left and right views inconsistent (initial error {err:.1f} px > threshold "
                 f"{threshold:g} px): the board moved between the exposures or the corners differ"
+            )
+        elif not consistent[pair_names[i]]:
+            reasons[i] = (
+                f"left and right views inconsistent with the other pairs (right-image RMS error "
+                f"{err_px[pair_names[i]]:.2f} px > {check.tolerance_px:.2f} px from the rig pose of the other "
+                "pairs): a wrong image in the pair, or the board moved between the two exposures"
             )
         else:
             used.append(i)
@@ -1741,12 +1776,12 @@ def _stereo_from_views(
         board_points=tuple(_frozen(b) for b in boards), residuals_left=tuple(rl), residuals_right=tuple(rr),
         omc_left=_frozen(om), Tc_left=_frozen(T), omc_left_error=_frozen(ome), Tc_left_error=_frozen(Te),
         mono_left=mono_l, mono_right=mono_r, pattern_size=tuple(pattern_size), square_size=tuple(square_size),
-        covariance=_frozen(sol["rig_cov"]), parameter_names=RIG_PARAMETER_NAMES,
+        covariance=_frozen(sol["rig_cov"]), parameter_names=RIG_PARAMETER_NAMES, pair_check=check,
         _inputs={
             "views_l": views_l, "views_r": views_r, "boards": boards, "size_l": size_l, "size_r": size_r,
             "est_l": est_l, "est_r": est_r, "pattern_size": pattern_size, "square_size": square_size,
             "threshold": threshold, "pair_names": pair_names, "suppressed": tuple(suppressed),
-            "locking": locking,
+            "locking": locking, "force": force, "max_offset": max_offset,
         },
     )
     logger.info("stereo calibration: om=%s T=%s over %d pairs", rig.om, rig.T, len(used))
@@ -1757,7 +1792,7 @@ def calibrate_stereo(
     left_images, right_images, pattern_size, square_size, *, estimate_skew=False, estimate_k3=False,
     estimate_tangential=True, estimate_principal_point=True, estimate_aspect_ratio=True,
     board_points=None, image_size=None, names=None, regions=None, window=7, method="auto",
-    correct_locking=True, threshold=50.0, suppress=(), progress=False,
+    correct_locking=True, threshold=50.0, suppress=(), progress=False, force=False, max_offset=3,
 ):
     """Calibrate a stereo rig from pairs of checkerboard views (the toolbox's stereo_gui).
 
@@ -1794,6 +1829,13 @@ def calibrate_stereo(
         Pairs to leave out.
     progress : bool, optional
         Show progress bars while detecting corners.
+    force : bool, optional
+        Calibrate even when the pairs look out of sync (a constant pairing offset, or
+        fewer than half the pairs agreeing on the rig pose); default False raises.
+        Identical left and right images are refused regardless.
+    max_offset : int, optional
+        Largest pairing offset (in pairs) tried when diagnosing pairs out of sync
+        (default 3).
 
     Returns
     -------
@@ -1807,7 +1849,9 @@ def calibrate_stereo(
     ValueError
         Different numbers of left and right views, fewer than 3 usable pairs (naming
         every rejected view and why), images of different sizes within a camera, an
-        invalid ``pattern_size``.
+        invalid ``pattern_size``; the same images given for both cameras; pairs out of
+        sync (the message gives the offset found and how to re-pair the images) unless
+        ``force``.
 
     Notes
     -----
@@ -1818,6 +1862,14 @@ def calibrate_stereo(
     :func:`scipy.optimize.least_squares` (the toolbox's ``go_calib_stereo``), with the
     toolbox's uncertainties ``3 * sqrt(diag((J^T J)^-1)) * std(residuals)``. Only pairs
     with the board in both images enter the joint refinement.
+
+    Bad pairs are refused (:mod:`wingphoto.calibcheck`): identical left and right
+    images; a pair whose own rig pose (from its two board poses) disagrees with the
+    others (right-image error above ``max(1 px, 8 x`` the median) is rejected and named
+    in ``rejected``; a constant offset between the left and right sequences is found by
+    re-pairing left ``i`` with right ``i + k`` (``|k| <= max_offset``) and reported with
+    the fix. ``result.pair_check`` keeps the per-pair table;
+    :func:`wingphoto.calibcheck.cross_validate` compares two halves of the pairs.
     """
     pattern_size = _check_pattern_size(pattern_size)
     square_size = _check_square_size(square_size)
@@ -1859,7 +1911,8 @@ def calibrate_stereo(
     drop = _select(suppress, list(pair_names), "pair")
     return _stereo_from_views(
         views_l, views_r, boards, size_l, size_r, est, est, pattern_size, square_size,
-        float(threshold), pair_names, suppressed=drop, locking=bool(correct_locking),
+        float(threshold), pair_names, suppressed=drop, locking=bool(correct_locking), force=bool(force),
+        max_offset=int(max_offset),
     )
 
 

@@ -6,6 +6,7 @@ high-speed cameras saw, and returns every image together with the truth that mad
 
 * :func:`thesis_rig` - a 512 x 512 stereo rig like the thesis' (optionally perturbed);
 * :func:`render_calibration_set` - checkerboard pairs posed by a pan-tilt schedule;
+* :func:`render_calibration_video` - both cameras recording the pan-tilt run (holds, moves);
 * :func:`render_flapping` - a flapping, bending, pitching, cambered wing with white
   painted markers, a two-marker mount and six static reference dots, optionally with
   glare and motion blur (``preset="hard"`` switches on everything at once);
@@ -48,6 +49,7 @@ from __future__ import annotations
 # finishing), board (pan-tilt checkerboards), wing (model, markers, sequence container),
 # flapping (the wing's rendering), target (rigid two-marker target), samples (data-samples/).
 from .board import CalibrationSet, pan_tilt_schedule, render_calibration_set
+from .calib_video import CalibrationVideo, render_calibration_video
 from .flapping import flapping_preset, render_flapping
 from .raster import render_discs
 from .rig import CAMERAS, IMAGE_SIZE, LEVELS, load_rig, rig_from_dict, rig_to_dict, scene_frame, thesis_rig
@@ -57,6 +59,8 @@ from .wing import StereoSequence, WingMotion, wing_motion
 
 __all__ = [
     "CalibrationSet",
+    "CalibrationVideo",
+    "render_calibration_video",
     "StereoSequence",
     "WingMotion",
     "wing_motion",
