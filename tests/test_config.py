@@ -79,3 +79,58 @@ def test_frozen():
     s = AnalysisSettings()
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.phase_bins = 3
+
+
+# ------------------------------------------------------------------ wingphoto analyse
+def test_analyse_command_on_a_synth_wing(tmp_path, capsys):
+    import numpy as np
+    import pandas as pd
+
+    from wingphoto.cli import main
+    from wingphoto.io import write_points_csv
+    from wingphoto.synth import wing_motion
+
+    # two whole strokes: the zero of the stroke angle is the mean direction (mid-stroke)
+    m = wing_motion(n_frames=200, stroke_amplitude_deg=86, pitch_deg=27, deviation_deg=4.0, phase_deg=66.0)
+    pts = m.points()
+    # the user's own numbering: every marker number shifted by 100
+    pts["point"] += 100
+    write_points_csv(pts, tmp_path / "points3d.csv")
+    s = AnalysisSettings.for_synth(hinge=m.hinge)
+    shifted = AnalysisSettings(
+        length_pairs=[(i + 100, j + 100) for i, j in s.length_pairs], nominal_lengths={"118-119": 10.0},
+        reference_ids=[r + 100 for r in s.reference_ids], leading_edge=[p + 100 for p in s.leading_edge],
+        trailing_edge=[p + 100 for p in s.trailing_edge], chord_rows=[[p + 100 for p in r] for r in s.chord_rows],
+        hinge=s.hinge, phase_bins=40, mesh_shape=(5, 3))
+    (tmp_path / "analysis.toml").write_text(shifted.to_toml())
+    rc = main(["analyse", str(tmp_path / "points3d.csv"), "--config", str(tmp_path / "analysis.toml"),
+               "--out", str(tmp_path / "out")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "references still: test valid" in text and "length 118-119" in text
+    out = tmp_path / "out"
+    for name in ["kinematics.csv", "reversals.csv", "phase_average.csv", "length_statistics.csv",
+                 "reference_stillness.csv", "surface_residuals.csv", "kinematics.png", "analysis.toml",
+                 "surface/wing.vtu.series"]:
+        assert (out / name).is_file(), name
+    kin = pd.read_csv(out / "kinematics.csv")
+    stroke = kin[kin["quantity"] == "stroke"].sort_values("frame")["value"].to_numpy()
+    assert np.abs(stroke - m.kinematics["stroke_deg"]).max() < 0.75  # 2 mm tip bending tilts the span axis
+    stats = pd.read_csv(out / "length_statistics.csv")
+    mount = stats[(stats["i"] == 118) & (stats["j"] == 119)].iloc[0]
+    assert mount["nominal"] == 10.0 and mount["bias"] == pytest.approx(mount["mean"] - 10.0)
+    avg = pd.read_csv(out / "phase_average.csv")
+    assert avg["phase"].nunique() == 40
+    assert load_analysis_settings(out / "analysis.toml") == shifted
+
+
+def test_analyse_command_errors(tmp_path, capsys):
+    from wingphoto.cli import main
+
+    (tmp_path / "a.toml").write_text("[batch]\nx = 1\n")
+    (tmp_path / "p.csv").write_text("frame,point,X,Y,Z,reproj_err\n0,0,1,2,3,0\n")
+    rc = main(["analyse", str(tmp_path / "p.csv"), "--config", str(tmp_path / "a.toml"), "--out", str(tmp_path / "o")])
+    assert rc == 1 and "no [analysis] table" in capsys.readouterr().err
+    (tmp_path / "a.toml").write_text("[analysis]\nleading_edge = [0, 7]\n")
+    rc = main(["analyse", str(tmp_path / "p.csv"), "--config", str(tmp_path / "a.toml"), "--out", str(tmp_path / "o")])
+    assert rc == 1 and "leading-edge point 7 is not in the points" in capsys.readouterr().err

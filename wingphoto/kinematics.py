@@ -507,11 +507,20 @@ def kinematic_reversals(kin, *, window=5, prominence=None):
     Returns
     -------
     pandas.DataFrame
-        Columns quantity, station, frame (float, sub-frame), value, kind (max/min).
+        Columns quantity, station, frame (float, sub-frame), value, kind (max/min). A
+        quantity whose range is within 3 times its median sigma (or rounding) is left
+        out: it does not reverse.
     """
     rows = []
     for (q, st), g in kin.groupby(["quantity", kin["station"].fillna(-1.0)], sort=False):
         g = g.sort_values("frame")
+        v = g["value"].to_numpy(float)
+        if np.isfinite(v).sum() < 3:
+            continue
+        rng = float(np.nanmax(v) - np.nanmin(v))
+        noise = float(np.nanmedian(g["sigma"])) if g["sigma"].notna().any() else 0.0
+        if rng <= max(3.0 * noise, 1e-9 * (1.0 + float(np.nanmax(np.abs(v))))):
+            continue  # a constant quantity (e.g. no twist) has no reversals, only rounding noise
         rev = find_reversals(g["value"].to_numpy(float), frames=g["frame"].to_numpy(float), window=window,
                              prominence=prominence)
         for r in rev.itertuples(index=False):

@@ -42,6 +42,7 @@ __all__ = [
     "load_sample",
     "track_stereo",
     "run_demo",
+    "analyse_points",
 ]
 
 
@@ -489,3 +490,136 @@ def run_demo(data="data-samples", *, out="results", video=True, progress=True):
     with atomic_write(out / "summary.txt", "w") as f:
         f.write(summary + "\n")
     return summary
+
+
+def _write_table(df, path):
+    with atomic_write(path, "w", newline="") as f:
+        df.to_csv(f, index=False)
+
+
+def analyse_points(points, settings, *, out=None, tracks=None):
+    """Analyse a 3D points table with the user's marker roles: every table and figure.
+
+    Parameters
+    ----------
+    points : pandas.DataFrame or str or Path
+        3D points (frame, point, X, Y, Z mm[, sigma/covariance columns]) or their CSV.
+    settings : AnalysisSettings, mapping, or str / Path
+        Marker roles and options (:class:`wingphoto.config.AnalysisSettings`; a mapping
+        is its ``[analysis]`` table; a path a TOML file with that table).
+    out : str or Path, optional
+        Folder for ``<table>.csv``, figures (``.png``), the wing-surface meshes
+        (``surface/wing.vtu.series``) and the settings used (``analysis.toml``).
+    tracks : pandas.DataFrame, optional
+        The tracks the points came from: adds a ``tracking`` table (point-frames per
+        camera and status).
+
+    Returns
+    -------
+    dict of str -> pandas.DataFrame
+        Only what the settings allow: ``reference_stillness`` (reference_ids),
+        ``length_statistics`` (length_pairs; nominal columns where known; expected_std
+        with point uncertainties), ``kinematics`` and ``reversals`` (leading_edge),
+        ``phase_average`` (when the stroke shows two reversals), ``surface_residuals``
+        (trailing_edge at >= 2 stations), ``tracking`` (tracks).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from . import plots3d
+    from .analysis import length_statistics, reference_stillness
+    from .config import AnalysisSettings, load_analysis_settings
+    from .io import read_points_csv
+    from .kinematics import (
+        fit_wing_surface,
+        kinematic_reversals,
+        phase_average,
+        resample_phase,
+        stroke_phase,
+        wing_kinematics,
+    )
+
+    if isinstance(settings, (str, Path)):
+        settings = load_analysis_settings(settings)
+    elif not isinstance(settings, AnalysisSettings):
+        settings = AnalysisSettings.from_dict(settings)
+    if isinstance(points, (str, Path)):
+        points = read_points_csv(points)
+    out = None if out is None else Path(out)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        with atomic_write(out / "analysis.toml", "w") as f:
+            f.write(settings.to_toml())
+    s = settings
+    tables = {}
+    figures = []
+    if s.reference_ids:
+        still = reference_stillness(points, list(s.reference_ids), tol_mm=s.reference_tol_mm)
+        tables["reference_stillness"] = still.table
+        fig, ax = plt.subplots(figsize=(6, 4))
+        plots3d.plot_reference_stillness(still, ax=ax)
+        figures.append((fig, "reference_stillness.png"))
+    if s.length_pairs:
+        stats = length_statistics(points, list(s.length_pairs))
+        if s.nominal_lengths:
+            nom = [s.nominal_lengths.get((int(i), int(j)), np.nan) for i, j in zip(stats["i"], stats["j"])]
+            stats["nominal"] = nom
+            stats["bias"] = stats["mean"] - stats["nominal"]
+            stats["max_error"] = np.maximum(np.abs(stats["max"] - stats["nominal"]),
+                                            np.abs(stats["min"] - stats["nominal"]))
+        tables["length_statistics"] = stats
+        fig, ax = plt.subplots(figsize=(6, 4))
+        plots3d.plot_length_statistics(stats, ax=ax)
+        figures.append((fig, "length_statistics.png"))
+    if s.leading_edge:
+        kin = wing_kinematics(points, leading_edge=s.leading_edge, trailing_edge=s.trailing_edge or None,
+                              chord_rows=s.chord_rows, root=s.root, hinge=s.hinge, stroke_plane=s.stroke_plane)
+        tables["kinematics"] = kin
+        tables["reversals"] = kinematic_reversals(kin)
+        stroke = kin[kin["quantity"] == "stroke"]
+        try:
+            phase = stroke_phase(stroke["value"].to_numpy(), stroke["frame"].to_numpy())
+        except ValueError as exc:
+            log.info("no phase average: %s", exc)
+            phase = None
+        if phase is not None:
+            parts = []
+            for (q, st), g in kin.groupby(["quantity", kin["station"].fillna(-1.0)], sort=False):
+                r = resample_phase(g["value"].to_numpy(), phase, bins=s.phase_bins, method=s.interpolation,
+                                   tension=s.cardinal_tension, frames=g["frame"].to_numpy())
+                parts.append(r.assign(quantity=q, station=np.nan if st == -1.0 else st))
+            tables["phase_average"] = phase_average(pd.concat(parts, ignore_index=True), by=["quantity", "station"])
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+        for ax, q in zip(axes.ravel(), ("stroke", "deviation", "pitch", "camber")):
+            sub = kin[kin["quantity"] == q]
+            for st, g in sub.groupby(sub["station"].fillna(-1.0)):
+                ax.plot(g["frame"], g["value"], label=None if st == -1.0 else f"station {st:.2f}")
+            unit = sub["unit"].iloc[0] if len(sub) else ""
+            ax.set_title(q)
+            ax.set_ylabel(unit)
+            if sub["station"].notna().any():
+                ax.legend(fontsize=7)
+        for ax in axes[-1]:
+            ax.set_xlabel("frame")
+        figures.append((fig, "kinematics.png"))
+        if len(s.trailing_edge) >= 2:
+            surf = fit_wing_surface(points, leading_edge=s.leading_edge, trailing_edge=s.trailing_edge,
+                                    chord_rows=s.chord_rows, root=s.root, hinge=s.hinge, model=s.surface_model,
+                                    mesh_shape=s.mesh_shape)
+            tables["surface_residuals"] = surf.residuals
+            if out is not None and np.isfinite(surf.vertices).all(axis=(1, 2)).any():
+                surf.write(out / "surface", fmt="vtu", name="wing")
+    if tracks is not None:
+        key = ["camera", "status"] if "camera" in tracks.columns else ["status"]
+        tables["tracking"] = tracks.groupby(key).size().rename("point_frames").reset_index()
+    if out is not None:
+        for name, df in tables.items():
+            _write_table(df, out / f"{name}.csv")
+        for fig, name in figures:
+            _save_figure(fig, out / name)
+    else:
+        for fig, _ in figures:
+            plt.close(fig)
+    return tables

@@ -24,6 +24,7 @@ COMMANDS = (
     "check",
     "track",
     "triangulate",
+    "analyse",
     "export",
     "batch",
     "demo",
