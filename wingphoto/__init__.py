@@ -80,3 +80,19 @@ from .io.exchange import (
     write_parquet,
     write_thesis_mat,
 )
+from .config import AnalysisSettings, load_analysis_settings
+from .kinematics import (
+    WingSurface,
+    compare_interpolation,
+    fit_wing_surface,
+    kinematic_reversals,
+    kinematics_wide,
+    phase_average,
+    resample_phase,
+    stroke_phase,
+    wing_kinematics,
+)
+from .stitch import Stitched, stitch_tests
+from .uncertainty import add_point_uncertainty, calibration_covariance, propagate_point_covariance
+from .planner import ViewPlan, compare_placements, plan_views
+from .pipeline import analyse_points
