@@ -25,9 +25,14 @@ bench: $(VENV)/.stamp-test
 	$(PY) benchmarks/calib_bench.py
 	$(PY) benchmarks/track_bench.py
 
+# JupyterLab refuses to run as root without --allow-root (containers, many lab workstations);
+# LAB_ARGS passes more options, e.g. `make lab LAB_ARGS="--port 8890 --no-browser"`
+LAB_ARGS ?=
+ALLOW_ROOT := $(if $(filter 0,$(shell id -u 2>/dev/null)),--allow-root,)
+
 lab: $(VENV)/.stamp-run
 	$(PY) -m pip install --quiet -e ".[notebooks]"
-	$(VENV)/bin/jupyter lab notebooks
+	$(VENV)/bin/jupyter lab $(ALLOW_ROOT) $(LAB_ARGS) notebooks
 
 clean:
 	rm -rf $(VENV) results
