@@ -139,11 +139,16 @@ class Camera:
             kc = np.append(kc, 0.0)
         object.__setattr__(self, "kc", _frozen_array(kc, (5,), "kc"))
         alpha = float(np.asarray(self.alpha_c, dtype=np.float64).reshape(-1)[0])
+        if not np.isfinite(alpha):
+            raise ValueError(f"alpha_c must be a finite skew coefficient (usually 0), got {alpha}")
         object.__setattr__(self, "alpha_c", alpha)
         if np.any(self.fc <= 0):
             raise ValueError(f"fc must be positive focal lengths in pixels, got {self.fc}")
         if self.image_size is not None:
-            w, h = (int(v) for v in np.asarray(self.image_size).reshape(-1)[:2])
+            size = np.asarray(self.image_size, dtype=np.float64).reshape(-1)
+            if size.size != 2 or not np.all(np.isfinite(size)) or np.any(size < 1) or np.any(size != np.round(size)):
+                raise ValueError(f"image_size must be (width, height) in whole pixels >= 1, got {self.image_size!r}")
+            w, h = (int(v) for v in size)
             object.__setattr__(self, "image_size", (w, h))
 
     # ------------------------------------------------------------------ model

@@ -116,6 +116,9 @@ def bpass(image, lnoise, lobject, threshold=0):
     ((40, 45), 0.0, True)
     """
     a = _image2d(image).astype(np.float64)
+    if not (np.isfinite(lnoise) and np.isfinite(lobject)) or np.isnan(threshold):
+        raise ValueError(f"lnoise, lobject must be finite lengths (px) and threshold a number, got {lnoise}, "
+                         f"{lobject}, {threshold}")
     if lnoise < 0 or lobject < 0:
         raise ValueError(f"lnoise and lobject must be >= 0, got {lnoise}, {lobject}")
     if lnoise == 0:
@@ -190,6 +193,10 @@ def pkfnd(image, threshold, sz=None):
     [[7, 5], [16, 14]]
     """
     im = _image2d(image)
+    if np.isnan(threshold):
+        raise ValueError(f"threshold must be a grey level, got {threshold}")
+    if sz is not None and not (np.isfinite(sz) and sz >= 1):
+        raise ValueError(f"sz must be a marker size >= 1 px (a little more than its diameter), got {sz}")
     nr, nc = im.shape
     if nr < 3 or nc < 3:
         return np.zeros((0, 2), dtype=np.int64)
