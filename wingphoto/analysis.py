@@ -430,8 +430,8 @@ def reference_stillness(points, reference_ids, *, tol_mm=None, relative_to="mean
         rms = np.array([np.sqrt(np.nanmean(finite[:, k] ** 2)) if n[k] else np.nan for k in range(len(ref))])
     if min_frames is None:
         min_frames = min(10, len(P))
-    if int(min_frames) < 1:
-        raise ValueError(f"min_frames must be at least 1, got {min_frames}")
+    if not (np.isfinite(min_frames) and int(min_frames) >= 1):
+        raise ValueError(f"min_frames must be a number of frames >= 1, got {min_frames}")
     valid = (n >= int(min_frames)) & (max_d <= tol_mm)
     for r, k in zip(ref, n):
         if 0 < k < int(min_frames):
