@@ -5,6 +5,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from wingphoto.calibrate import RIG_PARAMETER_NAMES, board_points, calibrate_stereo
@@ -198,3 +199,85 @@ def test_cross_validation_flags_halves_that_disagree_beyond_their_uncertainty(mo
     assert "disagree" in cv.summary()
     with pytest.raises(ValueError, match="split must be"):
         calibcheck.cross_validate(_good_sample_calibration(), split="random")
+
+
+# ------------------------------------------------------------------ the CLI on rendered image folders
+@pytest.fixture(scope="module")
+def calib_folders(tmp_path_factory):
+    """12 rendered pairs (3 tilts x 4 pans, raster order) as PNG folders."""
+    import cv2
+
+    root = tmp_path_factory.mktemp("calib")
+    cs = synth.render_calibration_set(n_tilts=3, n_pans=4, supersample=1, seed=5)
+    for side, imgs in (("left", cs.left_images), ("right", cs.right_images)):
+        (root / side).mkdir()
+        for k, img in enumerate(imgs):
+            cv2.imwrite(str(root / side / f"{side}{k + 1:02d}.png"), img)
+    return root, cs
+
+
+def _run_cli(argv, capsys):
+    from wingphoto.cli import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_writes_error_analysis_and_names_the_worst_views(calib_folders, tmp_path, capsys):
+    root, cs = calib_folders
+    board = tmp_path / "board.json"
+    board.write_text('{"pattern_size": [9, 6], "square_size": 8.0}')
+    out = tmp_path / "res" / "Calib_Results_stereo.mat"
+    code, text, err = _run_cli(["calibrate", "--left", str(root / "left"), "--right", str(root / "right"),
+                                "--board", str(board), "--out", str(out), "--suppress", "2,left05.png"], capsys)
+    assert code == 0, err
+    assert "pair consistency: 10 of 10 pairs agree" in text and "worst views: " in text
+    table = pd.read_csv(out.parent / "view_errors.csv")
+    assert table.number.tolist() == list(range(1, 13)) and table.pair.iloc[0] == "left01.png"
+    assert not table.used.iloc[1] and not table.used.iloc[4] and table.used.sum() == 10
+    assert table.reason.iloc[1] == "suppressed by the user"
+    assert (table.loc[table.used, "error_left_px"] < 0.2).all()
+    for name in ("residuals_left.png", "residuals_right.png", "view_errors.png", "coverage_left.png",
+                 "coverage_right.png"):
+        assert (out.parent / name).stat().st_size > 5000
+    io = pytest.importorskip("wingphoto.io")
+    rig, _ = io.load_bouguet_stereo(out)
+    assert np.abs(rig.T - cs.rig.T).max() < 1.0
+
+
+def test_cli_refuses_the_same_folder_twice_and_shifted_pairs(calib_folders, tmp_path, capsys):
+    import shutil
+
+    root, _ = calib_folders
+    args = ["--pattern", "9x6", "--square", "8", "--out", str(tmp_path / "c.mat")]
+    code, _, err = _run_cli(["calibrate", "--left", str(root / "left"), "--right", str(root / "left")] + args, capsys)
+    assert code == 1 and "identical in all 12 pairs" in err
+    shifted = tmp_path / "shifted"
+    shifted.mkdir()
+    names = sorted(p.name for p in (root / "right").iterdir())
+    for k, name in enumerate(names):  # right image k+2 saved under the name of k (+ the first two at the end)
+        shutil.copy(root / "right" / names[(k + 1) % len(names)], shifted / name)
+    code, _, err = _run_cli(["calibrate", "--left", str(root / "left"), "--right", str(shifted)] + args, capsys)
+    assert code == 1 and "out of sync by -1" in err and "--force" in err
+    assert not (tmp_path / "c.mat").exists()
+    code, text, err = _run_cli(["calibrate", "--left", str(root / "left"), "--right", str(shifted), "--force"]
+                               + args, capsys)
+    assert code == 0 and (tmp_path / "c.mat").exists()
+
+
+def test_cli_partial_board_and_help(calib_folders, tmp_path, capsys):
+    root, _ = calib_folders
+    code, text, err = _run_cli(["calibrate", "--left", str(root / "left"), "--right", str(root / "right"),
+                                "--pattern", "9x6", "--square", "8", "--rows", "0-3", "--estimate-k3",
+                                "--out", str(tmp_path / "c.mat")], capsys)
+    assert code == 0, err
+    assert "kc_left = [" in text
+    from wingphoto.cli import build_parser
+
+    help_text = build_parser()._subparsers._group_actions[0].choices["calibrate"].format_help()
+    for flag in ("--suppress", "--estimate-k3", "--estimate-skew", "--rows", "--cols", "--board", "--force",
+                 "board.json", "view_errors.csv"):
+        assert flag in help_text
+    code, _, err = _run_cli(["calibrate", "--left", "x", "--right", "y", "--out", str(tmp_path / "c.mat")], capsys)
+    assert code == 1 and "give the board" in err

@@ -1944,7 +1944,10 @@ def suggest_suppress(result, *, factor=2.0):
     if not np.isfinite(factor) or factor <= 0:
         raise ValueError(f"factor must be a positive number, got {factor!r}")
     if isinstance(result, StereoCalibration):
-        err = np.nanmax(result.view_errors, axis=1) if result.used.any() else np.array([])
+        ve = result.view_errors
+        err = np.full(len(ve), np.nan)
+        seen = np.isfinite(ve).any(axis=1)
+        err[seen] = np.nanmax(ve[seen], axis=1)  # unused pairs stay NaN (no all-NaN warning)
         names = result.pairs
     elif isinstance(result, CameraCalibration):
         err = result.view_errors
