@@ -31,7 +31,7 @@ from wingphoto.cli import main  # noqa: E402
 from wingphoto.io import atomic as atomic_mod  # noqa: E402
 from wingphoto.io import atomic_write, read_tracks_csv, save_bouguet_stereo, write_tracks_csv  # noqa: E402
 
-FEW = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FEW = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 IMAGE = (512, 480)
 
 
@@ -563,3 +563,154 @@ def test_stillness_default_fails_a_slow_drift():
     P = _still_references(300, 0.002, seed=9)
     P[:, :, 0] += np.linspace(0, 0.05, 300)[:, None]  # the mount creeps 0.05 mm
     assert not wp.reference_stillness(P, range(6)).valid
+
+
+def test_stillness_min_frames_nan_refused():
+    with pytest.raises(ValueError, match="min_frames must be a number of frames >= 1"):
+        wp.reference_stillness(np.zeros((20, 2, 3)), [0], min_frames=np.nan)
+
+
+# ===================================================== options reaching OpenCV / numpy
+@pytest.mark.parametrize("call, match", [
+    (lambda: wp.bpass(np.zeros((20, 20)), np.nan, 5), "lnoise, lobject must be finite"),
+    (lambda: wp.bpass(np.zeros((20, 20)), 1, np.inf), "lnoise, lobject must be finite"),
+    (lambda: wp.pkfnd(np.zeros((20, 20)), np.nan), "threshold must be a grey level"),
+    (lambda: wp.pkfnd(np.zeros((20, 20)), 0.5, -3), "sz must be a marker size >= 1"),
+    (lambda: Camera(fc=[1000, 1000], cc=[1, 1], alpha_c=np.nan), "alpha_c must be a finite"),
+    (lambda: Camera(fc=[1000, 1000], cc=[1, 1], image_size=(-5, 10)), "image_size must be"),
+    (lambda: Camera(fc=[1000, 1000], cc=[1, 1], image_size=(np.nan, 10)), "image_size must be"),
+])
+def test_numeric_options_are_checked(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def _tracks_for_video():
+    return pd.DataFrame({"camera": "left", "frame": [0, 1], "point": 0, "x": 10.0, "y": 10.0, "score": 1.0,
+                         "status": "ok"})
+
+
+def test_video_refuses_folder_fifo_and_huge_scale(tmp_path):
+    frames = [np.zeros((40, 50), np.uint8)] * 2
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        wp.write_tracking_video(frames, _tracks_for_video(), tmp_path, progress=False)
+    fifo = tmp_path / "v.mp4"
+    os.mkfifo(fifo)
+    with pytest.raises(OSError, match="not a regular file"):
+        wp.write_tracking_video(frames, _tracks_for_video(), fifo, progress=False)
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4"]  # no sibling .avi written
+    with pytest.raises(ValueError, match=r"more than video codecs take .*use scale <= 327"):
+        wp.write_tracking_video(frames, _tracks_for_video(), tmp_path / "w.mp4", scale=10**4, progress=False)
+    with pytest.raises(ValueError, match="fps must be positive"):
+        wp.write_tracking_video(frames, _tracks_for_video(), tmp_path / "w.mp4", fps=np.inf, progress=False)
+
+
+def test_pantilt_absurd_stop_count_is_refused(capsys):
+    code, _, err = _cli(capsys, "pantilt", "--pans", "1000000000")
+    assert code == 1
+    _one_line_error(err, "pan stops must be at most 1000")
+
+
+# ============================================ other issues' fixes, through the public CLI
+def _moving_frames(folder, n=6, dtype=np.uint8):
+    import tifffile
+
+    folder.mkdir()
+    for k in range(n):
+        im = np.zeros((64, 80), np.uint8)
+        im[20:26, 30 + k:36 + k] = 200
+        im[40:44, 10:14] = 120 + k
+        tifffile.imwrite(folder / f"f{k:03d}.tif", im.astype(dtype))
+    return folder
+
+
+@pytest.fixture
+def track_inputs(tmp_path):
+    frames = _moving_frames(tmp_path / "frames")
+    picks = tmp_path / "picks.csv"
+    picks.write_text("camera,point,frame,x,y\nleft,0,0,32.5,22.5\n")
+    out = tmp_path / "tracks.csv"
+    out.write_text("old tracks\n")
+    return {"frames": frames, "picks": picks, "out": out, "dir": tmp_path}
+
+
+def _track(inp, *extra, picks=None, frames=None, out=None):
+    return ["track", "--frames", frames or inp["frames"], "--picks", picks or inp["picks"],
+            "--out", out or inp["out"], *extra]
+
+
+def test_track_output_folder_refused_before_tracking(track_inputs, capsys):
+    code, _, err = _cli(capsys, *_track(track_inputs, out=track_inputs["dir"]))
+    assert code == 1
+    _one_line_error(err, track_inputs["dir"], "is a folder")
+    code, _, err = _cli(capsys, *_track(track_inputs, "--checkpoint", track_inputs["dir"]))
+    assert code == 1 and track_inputs["out"].read_text() == "old tracks\n"
+    _one_line_error(err, "is a folder")
+
+
+@pytest.mark.parametrize("text, match", [
+    ("camera,point,frame,x,y\nright,0,0,32.5,22.5\n", "has no picks for the left camera"),
+    ("camera,point,frame,x,y\nleft,0,0,32.5,22.5\nleft,1,0,32.5,22.5\n", "points 0 and 1 .* on the same spot"),
+    ("camera,point,frame,x,y\nleft,0,0,nan,22.5\nleft,1,0,50,22.5\n", "left point 0 has no valid position"),
+    ("camera,point,frame,x,y\nleft,0,0,5000,22.5\n", "outside the 80x64 image"),
+])
+def test_bad_picks_are_named(track_inputs, capsys, text, match):
+    """Issue 13 item 6 (wingphoto.picks): the picks file and the point are named."""
+    track_inputs["picks"].write_text(text)
+    code, _, err = _cli(capsys, *_track(track_inputs))
+    assert code == 1 and track_inputs["out"].read_text() == "old tracks\n"
+    line = _one_line_error(err)
+    assert re_search(match, line), line
+
+
+def re_search(pattern, text):
+    import re
+
+    return re.search(pattern, text) is not None
+
+
+def test_int16_frames_name_the_file(track_inputs, capsys):
+    """Issue 13 item 5 (sequences): signed 16-bit frames are refused, naming the file."""
+    frames = _moving_frames(track_inputs["dir"] / "i16", dtype=np.int16)
+    code, _, err = _cli(capsys, *_track(track_inputs, frames=frames))
+    assert code == 1
+    _one_line_error(err, frames / "f000.tif", "int16")
+
+
+def test_file_replaced_after_opening_is_detected(track_inputs):
+    """Issue 13 item 6 (sequences): a frame file replaced after read_sequence is not read garbled."""
+    import tifffile
+
+    seq = wp.read_sequence(track_inputs["frames"])
+    _ = seq[0]
+    tifffile.imwrite(track_inputs["frames"] / "f003.tif", np.zeros((32, 40), np.uint8))
+    with pytest.raises(ValueError, match=r"f003\.tif changed on disk after the sequence was opened"):
+        [seq[k] for k in range(len(seq))]
+
+
+def test_max_coast_negative_refused():
+    """Issue 13 item 5 (tracker options)."""
+    frames = [np.pad(np.full((5, 5), 200, np.uint8), 10)] * 3
+    with pytest.raises(ValueError, match="max_coast must be >= 0"):
+        wp.track_markers(frames, pd.DataFrame({"point": [0], "x": [12.0], "y": [12.0]}), max_coast=-1, progress=False)
+
+
+@FEW
+@given(data=st.binary(max_size=300))
+def test_random_bytes_as_tiff(tmp_path_factory, data):
+    p = tmp_path_factory.mktemp("tif") / "frame.tif"
+    p.write_bytes(data)
+    with pytest.raises((ValueError, OSError)) as info:
+        seq = wp.read_sequence(p)
+        [seq[k] for k in range(len(seq))]
+    assert str(p) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_subprocess_random_bytes_tiff(track_inputs):
+    """The real exit code and stderr for a random-bytes TIFF given as the frames."""
+    bad = track_inputs["dir"] / "bad.tif"
+    bad.write_bytes(os.urandom(500))
+    code, err = _run(*_track(track_inputs, frames=bad))
+    assert code == 1 and "Traceback" not in err and str(bad) in err, err
+    assert track_inputs["out"].read_text() == "old tracks\n"
