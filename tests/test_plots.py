@@ -66,13 +66,18 @@ def test_plot_residuals_one_colour_per_used_view():
     ax = plot_residuals(cal)
     assert isinstance(ax, matplotlib.axes.Axes)
     assert len(ax.collections) == int(cal.used.sum()) == 6
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == list(cal.views)
+    assert [c.get_label() for c in ax.collections] == list(cal.views)
+    # a compact colour scale names the views, not a legend over the data
+    assert ax.get_legend() is None
+    bar = ax.child_axes[0]
+    assert [t.get_text() for t in bar.get_xticklabels()] == ["0", "1", "2", "3", "4", "5"]
+    assert bar.get_xlabel() == "view (img….png, 6 used)"
     # the scatter is the residuals, observed - projected, missing corners left out
     off = np.ma.getdata(ax.collections[1].get_offsets())
     np.testing.assert_allclose(off[np.isfinite(off[:, 0])], cal.residuals[1][5:])
     colours = {tuple(np.round(c.get_facecolor()[0], 6)) for c in ax.collections}
     assert len(colours) == 6
-    assert "Reprojection error" in ax.get_title()
+    assert "Reprojection error" in ax.get_title() and "RMS" in ax.get_title()
 
 
 def test_plot_residuals_draws_on_the_given_axes_and_picks_the_camera():
@@ -101,6 +106,23 @@ def test_plot_view_errors_names_the_worst_view():
     red = matplotlib.colors.to_rgba("tab:red")
     assert bars[3].get_facecolor() == red and bars[0].get_facecolor() != red  # suggest_suppress
     assert [t.get_text() for t in ax.get_xticklabels()] == list(cal.views)
+    assert ax.get_title().endswith("1 suggested for suppression (red)")
+
+
+def test_plot_view_errors_has_no_red_when_nothing_is_suggested():
+    st = _stereo()
+    red = matplotlib.colors.to_rgba("tab:red")
+    from wingphoto.calibrate import suggest_suppress
+
+    assert suggest_suppress(st) == []
+    fig, (a, b) = plt.subplots(1, 2)
+    plot_view_errors(st, camera="left", ax=a)
+    plot_view_errors(st, camera="right", ax=b)
+    for ax, cam in ((a, "left"), (b, "right")):
+        assert ax.get_title() == f"Reprojection error per view, {cam} camera\nnone suggested for suppression"
+        assert len(ax.texts) == 0 and all(bar.get_facecolor() != red for bar in ax.patches)
+        tops = [bar.get_height() + 0 for bar in ax.patches]
+        assert ax.get_ylim()[1] >= max(tops)
 
 
 def test_plot_view_errors_stereo_shows_both_cameras():
@@ -109,7 +131,7 @@ def test_plot_view_errors_stereo_shows_both_cameras():
     assert len(ax.patches) == 2 * len(st.pairs)
     heights = np.array([b.get_height() for b in ax.patches]).reshape(2, -1).T
     np.testing.assert_allclose(heights, st.view_errors)
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["left", "right"]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["left camera", "right camera"]
     assert len(plot_view_errors(st, camera="right").patches) == len(st.pairs)
 
 
@@ -171,3 +193,61 @@ def test_contact_sheet_lays_out_images_row_by_row():
     with pytest.raises(ValueError, match="empty"):
         plot_contact_sheet([])
     plt.close("all")
+
+
+def test_plot_length_statistics_shows_deviation_per_pair_with_std_in_the_label():
+    import pandas as pd
+
+    from wingphoto.plots3d import plot_length_statistics
+
+    # six pairs of 10-94 mm with a 0.4 um spread: on one 0-100 mm axis the spread is invisible
+    rows = []
+    rng = np.random.default_rng(4)
+    for k, L in enumerate([10.77, 88.02, 93.64, 89.82, 93.63, 88.08]):
+        for cond in ("still", "flapping"):
+            m = L + rng.normal(0, 2e-4)
+            rows.append((cond, 18 + k, 19 + k, 60, m, 4e-4, m - 1e-3, m + 1e-3))
+    stats = pd.DataFrame(rows, columns=["condition", "i", "j", "n", "mean", "std", "min", "max"])
+    ax = plot_length_statistics(stats)
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert len(labels) == 7  # one per pair and one for the bars, not 13
+    assert labels[0] == "thin bar: min to max; dot ± std"
+    assert labels[1].startswith("points 18-19: 10.770 mm, std 0.4 µm")
+    assert ax.get_ylabel() == "length − pair mean (µm)"
+    lo, hi = ax.get_ylim()
+    assert -3 < lo < -0.5 and 0.5 < hi < 3  # the micrometre spread fills the axis
+    assert "deviation from each pair's mean" in ax.get_title()
+
+
+def test_plot_points_3d_has_a_colour_bar_and_few_ticks():
+    from wingphoto.plots3d import plot_points_3d
+
+    rng = np.random.default_rng(2)
+    P = rng.normal([0, 0, 400], [20, 15, 5], size=(5, 9, 3))
+    ax = plot_points_3d(P, frames=[0, 2, 4])
+    bars = [a for a in ax.figure.axes if a is not ax]
+    assert len(bars) == 1 and bars[0].get_ylabel() == "frame"
+    ax.figure.canvas.draw()
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        assert len(axis.get_major_locator()()) <= 6
+    one = plot_points_3d(P, frames=1)
+    assert [a.get_ylabel() for a in one.figure.axes if a is not one] == ["depth Z (mm)"]
+
+
+def test_plot_picks_numbers_every_pick_on_both_views():
+    import pandas as pd
+
+    from wingphoto.plots import plot_picks
+
+    rng = np.random.default_rng(6)
+    images = {c: rng.integers(0, 255, (120, 160), dtype=np.uint8) for c in ("left", "right")}
+    picks = pd.DataFrame({"camera": ["left"] * 3 + ["right"] * 2, "point": [0, 1, 2, 0, 1],
+                          "x": [40.0, 60.0, 80.0, 42.0, 61.0], "y": [50.0, 52.0, 54.0, 50.0, 52.0],
+                          "half_w": 6.0, "half_h": 5.0})
+    fig = plot_picks(images, picks)
+    left, right = fig.axes
+    assert left.get_title() == "left view, frame 0: 3 markers picked"
+    assert [(t.get_text(), t.xy) for t in right.texts] == [("0", (42.0, 50.0)), ("1", (61.0, 52.0))]
+    assert [p.get_width() for p in left.patches] == [12.0] * 3
+    with pytest.raises(ValueError, match="'left' and/or 'right'"):
+        plot_picks({"top": images["left"]}, picks)

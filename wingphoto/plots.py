@@ -86,6 +86,49 @@ def plot_corners(image, detection, *, ax=None, cmap="gray"):
     return ax
 
 
+def _view_colour_scale(ax, names, idx, cmap="turbo"):
+    """Colours of the used views and a compact colour bar naming them (instead of a legend).
+
+    Returns the list of colours, one per entry of ``idx``; adds a colour bar to ``ax``'s
+    figure with at most ~8 labelled ticks (view names).
+    """
+    import matplotlib
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    n = max(len(idx), 1)
+    base = matplotlib.colormaps[cmap]
+    colours = [base(v) for v in np.linspace(0.05, 0.95, n)]
+    norm = BoundaryNorm(np.arange(n + 1) - 0.5, n)
+    mappable = ScalarMappable(norm=norm, cmap=ListedColormap(colours))
+    # a thin horizontal bar under the axes: it never runs into a neighbouring panel
+    cax = ax.inset_axes((0.0, -0.26, 1.0, 0.035))
+    bar = ax.figure.colorbar(mappable, cax=cax, orientation="horizontal")
+    used = [str(names[i]) for i in idx]
+    short, prefix, suffix = _short_names(used)
+    step = max(1, int(np.ceil(n / 12)))
+    ticks = list(range(0, len(used), step))
+    bar.set_ticks(ticks)
+    bar.set_ticklabels([short[t] for t in ticks])
+    bar.ax.tick_params(labelsize=7)
+    what = f"{prefix}…{suffix}" if (prefix or suffix) else "view"
+    bar.set_label(f"view ({what}, {len(idx)} used)", fontsize=8)
+    return colours, bar
+
+
+def _short_names(names):
+    """Names without their common prefix and suffix (``calib_07.tif`` -> ``07``)."""
+    import os
+
+    if len(names) < 2:
+        return list(names), "", ""
+    prefix = os.path.commonprefix(names)
+    suffix = os.path.commonprefix([n[::-1] for n in names])[::-1]
+    if any(len(n) <= len(prefix) + len(suffix) for n in names):
+        return list(names), "", ""
+    return [n[len(prefix):len(n) - len(suffix)] for n in names], prefix, suffix
+
+
 def plot_residuals(result, *, camera=None, ax=None, marker="+"):
     """Scatter the reprojection residuals, one colour per view (the toolbox's "Analyse error").
 
@@ -100,13 +143,15 @@ def plot_residuals(result, *, camera=None, ax=None, marker="+"):
     Returns
     -------
     ax : matplotlib Axes
-        One scatter collection per used view (labelled by view name), x and y
-        residuals ``observed - projected`` in pixels, equal axis scales.
+        One scatter collection per used view (its ``label`` the view name), x and y
+        residuals ``observed - projected`` in pixels, equal axis scales. The views are
+        told apart by a compact colour bar (not a legend covering the data); the title
+        gives the RMS error.
     """
     names, used, residuals, _, _ = _calibration_views(result, camera)
     ax = _axes(ax)
     idx = np.flatnonzero(used)
-    colours = _colours(len(idx))
+    colours, _ = _view_colour_scale(ax, names, idx)
     for c, i in zip(colours, idx):
         r = residuals[i]
         ax.scatter(r[:, 0], r[:, 1], s=14, marker=marker, color=c, label=names[i], linewidths=0.8)
@@ -116,14 +161,15 @@ def plot_residuals(result, *, camera=None, ax=None, marker="+"):
     ax.axhline(0, color="0.7", lw=0.5)
     ax.axvline(0, color="0.7", lw=0.5)
     side = f" ({camera or 'left'} camera)" if len(names) and hasattr(result, "rig") else ""
-    ax.set_title(f"Reprojection error (in pixel){side}")
-    if 0 < len(idx) <= 25:
-        ax.legend(fontsize=6, ncol=2, loc="best", markerscale=1.0)
+    allr = np.concatenate([residuals[i] for i in idx]) if len(idx) else np.zeros((0, 2))
+    allr = allr[np.all(np.isfinite(allr), axis=1)]
+    rms = float(np.sqrt(np.mean(np.sum(allr ** 2, axis=1)))) if len(allr) else float("nan")
+    ax.set_title(f"Reprojection error{side}: RMS {rms:.3f} px, {len(allr)} corners", fontsize=10)
     return ax
 
 
 def plot_view_errors(result, *, camera=None, ax=None, worst=3, factor=2.0):
-    """Bar chart of each view's mean reprojection error, the worst views named.
+    """Bar chart of each view's mean reprojection error; views suggested for suppression in red.
 
     Parameters
     ----------
@@ -132,7 +178,8 @@ def plot_view_errors(result, *, camera=None, ax=None, worst=3, factor=2.0):
         For a stereo calibration, show one camera only (default: both, side by side).
     ax : matplotlib Axes, optional
     worst : int, optional
-        Annotate this many views with the largest errors by name (default 3).
+        Name at most this many of the views suggested for suppression above their bars
+        (default 3). Views that are not suggested are never named in red.
     factor : float, optional
         Views that :func:`wingphoto.calibrate.suggest_suppress` (with this factor)
         proposes to suppress are drawn in red.
@@ -142,14 +189,17 @@ def plot_view_errors(result, *, camera=None, ax=None, worst=3, factor=2.0):
     ax : matplotlib Axes
         Mean pixel distance between observed and projected corners per view, with the
         standard deviation over its corners as error bars; unused views are left empty.
+        The title names the camera and how many views are suggested for suppression.
     """
     from .calibrate import StereoCalibration, suggest_suppress
 
     ax = _axes(ax)
-    sides = [camera] if camera is not None or not isinstance(result, StereoCalibration) else ["left", "right"]
+    stereo = isinstance(result, StereoCalibration)
+    sides = [camera] if camera is not None or not stereo else ["left", "right"]
     suggested = set(suggest_suppress(result, factor=factor))
     width = 0.8 / len(sides)
     means_all = None
+    highest = 0.0
     names = []
     for k, side in enumerate(sides):
         names, used, residuals, _, _ = _calibration_views(result, side)
@@ -161,22 +211,27 @@ def plot_view_errors(result, *, camera=None, ax=None, worst=3, factor=2.0):
         x = np.arange(n) + (k - (len(sides) - 1) / 2) * width
         base = "tab:blue" if k == 0 else "tab:cyan"
         colours = ["tab:red" if names[i] in suggested else base for i in range(n)]
-        label = side if isinstance(result, StereoCalibration) else None
+        label = f"{side} camera" if stereo else None
         ax.bar(x, np.nan_to_num(means), width=width, yerr=np.nan_to_num(stds), color=colours,
                capsize=2, label=label, error_kw={"lw": 0.8})
         means_all = means if means_all is None else np.fmax(means_all, means)
-    order = [i for i in np.argsort(-np.nan_to_num(means_all, nan=-1.0)) if np.isfinite(means_all[i])]
-    for i in order[: max(0, int(worst))]:
-        ax.annotate(names[i], (i, means_all[i]), xytext=(0, 8), textcoords="offset points",
-                    ha="center", fontsize=7, color="tab:red", rotation=90)
+        highest = max(highest, float(np.nanmax(means + stds)) if np.any(np.isfinite(means)) else 0.0)
+    flagged = [i for i in np.argsort(-np.nan_to_num(means_all, nan=-1.0))
+               if names[i] in suggested and np.isfinite(means_all[i])]
+    top = np.nanmax(means_all) if np.any(np.isfinite(means_all)) else 1.0
+    for i in flagged[: max(0, int(worst))]:
+        ax.annotate(names[i], (i, means_all[i]), xytext=(0, 6), textcoords="offset points",
+                    ha="center", va="bottom", fontsize=7, color="tab:red")
     ax.set_xticks(np.arange(len(names)))
     ax.set_xticklabels(names, rotation=90, fontsize=6)
     ax.set_ylabel("mean reprojection error (px)")
-    ax.set_title("Reprojection error per view")
+    who = f"{camera} camera" if camera is not None and stereo else ("both cameras" if stereo else "")
+    verdict = (f"{len(suggested)} suggested for suppression (red)" if suggested
+               else "none suggested for suppression")
+    ax.set_title(f"Reprojection error per view{', ' + who if who else ''}\n{verdict}", fontsize=9)
     if len(sides) > 1:
         ax.legend(fontsize=7)
-    top = np.nanmax(means_all) if np.any(np.isfinite(means_all)) else 1.0
-    ax.set_ylim(0, top * 1.6)
+    ax.set_ylim(0, max(top * 1.3, highest * 1.05))
     return ax
 
 

@@ -91,10 +91,23 @@ def plot_points_3d(points, frames=None, ax=None, *, point_ids=None, connect="seq
     shown = ids[cols]
     lines = _polylines(shown, connect)
     index = {int(p): k for k, p in enumerate(ids)}
-    colours = _colours(cmap, len(rows))
+    import matplotlib
+    from matplotlib.colors import Normalize
+
+    single = len(rows) == 1
+    colours = _colours(cmap, len(rows)) if not single else ["0.45"]
+    if single:  # one frame: the markers are coloured by depth, the colour bar says how deep
+        Zs = P[rows[0], cols][:, 2]
+        finite = Zs[np.isfinite(Zs)]
+        norm = Normalize(*(finite.min(), finite.max() + 1e-9) if len(finite) else (0.0, 1.0))
+        bar_label = "depth Z (mm)"
+    else:
+        norm = Normalize(float(all_frames[rows[0]]), float(all_frames[rows[-1]]) + 1e-9)
+        bar_label = "frame"
     for c, r in zip(colours, rows):
         X = P[r, cols]
-        ax.scatter(X[:, 0], X[:, 2], X[:, 1], color=c, s=marker_size, depthshade=False)
+        colour = matplotlib.colormaps[cmap](norm(X[:, 2])) if single else c
+        ax.scatter(X[:, 0], X[:, 2], X[:, 1], color=colour, s=marker_size, depthshade=False)
         for line in lines:
             L = P[r, [index[p] for p in line if p in index]]
             ax.plot(L[:, 0], L[:, 2], L[:, 1], color=c, linewidth=0.8)
@@ -102,9 +115,19 @@ def plot_points_3d(points, frames=None, ax=None, *, point_ids=None, connect="seq
             for p, x in zip(shown, X):
                 if np.all(np.isfinite(x)):
                     ax.text(x[0], x[2], x[1], str(int(p)), fontsize=7)
-    ax.set_xlabel("X (mm)")
-    ax.set_ylabel("Z (mm, depth)")
-    ax.set_zlabel("Y (mm, down)")
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.ticker import MaxNLocator
+
+    if len(rows):
+        bar = ax.figure.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.12)
+        bar.set_label(bar_label, fontsize=8)
+        bar.ax.tick_params(labelsize=7)
+    ax.set_xlabel("X (mm)", fontsize=8, labelpad=6)
+    ax.set_ylabel("Z (mm, depth)", fontsize=8, labelpad=6)
+    ax.set_zlabel("Y (mm, down)", fontsize=8, labelpad=6)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):  # few, short tick labels: readable, not overlapping
+        axis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(labelsize=7, pad=1)
     sel = P[np.ix_(rows, cols)].reshape(-1, 3)
     sel = sel[np.all(np.isfinite(sel), axis=1)]
     if len(sel):
@@ -130,7 +153,13 @@ def _colours(cmap, n):
 
 
 def plot_length_statistics(stats, ax=None, *, nominal=None):
-    """Length per condition: mean +/- std, min and max, and the nominal length (Figure 27 style).
+    """Length per condition as the deviation from each pair's mean: mean +/- std, min and max.
+
+    Lengths of different pairs (10 to 100 mm) on one axis hide their sub-micrometre
+    spread; so each pair is drawn relative to its own mean over all conditions, in um
+    when the deviations are below 0.1 mm (else mm), and its legend entry gives the
+    mean length, the pooled frame-to-frame std and, when known, the bias against the
+    nominal length.
 
     Parameters
     ----------
@@ -138,11 +167,12 @@ def plot_length_statistics(stats, ax=None, *, nominal=None):
         :func:`wingphoto.analysis.length_statistics` output.
     ax : matplotlib Axes, optional
     nominal : float, optional
-        Known length in mm; default the ``nominal`` column when present.
+        Known length in mm of every pair; default the ``nominal`` column when present.
 
     Returns
     -------
     ax : matplotlib Axes
+        One entry per pair in the legend (plus one explaining the min-max bars).
     """
     need = ["condition", "i", "j", "mean", "std", "min", "max"]
     missing = [c for c in need if c not in stats.columns]
@@ -153,23 +183,44 @@ def plot_length_statistics(stats, ax=None, *, nominal=None):
     conditions = list(pd.unique(stats["condition"]))
     pairs = list(dict.fromkeys(zip(stats["i"], stats["j"])))
     width = 0.6 / max(len(pairs), 1)
+    centres = {}
+    for i, j in pairs:
+        s = stats[(stats["i"] == i) & (stats["j"] == j)]
+        weights = s["n"].to_numpy(float) if "n" in s.columns else np.ones(len(s))
+        ok = np.isfinite(s["mean"].to_numpy(float)) & (weights > 0)
+        centres[(i, j)] = (float(np.average(s["mean"].to_numpy(float)[ok], weights=weights[ok]))
+                           if ok.any() else float("nan"))
+    dev = np.concatenate([np.abs(stats[c].to_numpy(float) - stats.apply(lambda r: centres[(r["i"], r["j"])], axis=1)
+                                 .to_numpy(float)) for c in ("min", "max")]) if len(stats) else np.zeros(1)
+    dev = dev[np.isfinite(dev)]
+    micro = not len(dev) or dev.max() < 0.1
+    scale, unit = (1000.0, "µm") if micro else (1.0, "mm")
     for k, (i, j) in enumerate(pairs):
         s = stats[(stats["i"] == i) & (stats["j"] == j)].set_index("condition").reindex(conditions)
         x = np.arange(len(conditions)) + (k - (len(pairs) - 1) / 2) * width
         colour = f"C{k % 10}"
-        label = f"points {i}-{j}"
-        ax.errorbar(x, s["mean"], yerr=s["std"], fmt="o", color=colour, capsize=4, label=f"{label}: mean ± std")
-        ax.vlines(x, s["min"], s["max"], color=colour, linewidth=0.8, alpha=0.6)
-        ax.plot(x, s["min"], "_", color=colour, markersize=12)
-        ax.plot(x, s["max"], "_", color=colour, markersize=12, label=f"{label}: min / max")
-    if nominal is None and "nominal" in stats.columns and stats["nominal"].notna().any():
-        nominal = float(stats["nominal"].dropna().iloc[0])
-    if nominal is not None:
-        ax.axhline(nominal, color="k", linestyle="--", linewidth=1, label=f"nominal {nominal:g} mm")
+        c = centres[(i, j)]
+        pooled = float(np.sqrt(np.nanmean(s["std"].to_numpy(float) ** 2)))
+        label = f"points {i}-{j}: {c:.3f} mm, std {pooled * scale:.3g} {unit}"
+        ref = nominal
+        if ref is None and "nominal" in s.columns and s["nominal"].notna().any():
+            ref = float(s["nominal"].dropna().iloc[0])
+        if ref is not None:
+            label += f", bias {(c - ref) * scale:+.3g} {unit}"
+        ax.errorbar(x, (s["mean"] - c) * scale, yerr=s["std"] * scale, fmt="o", color=colour, capsize=4,
+                    label=label, markersize=4)
+        ax.vlines(x, (s["min"] - c) * scale, (s["max"] - c) * scale, color=colour, linewidth=0.8, alpha=0.6)
+        ax.plot(x, (s["min"] - c) * scale, "_", color=colour, markersize=10)
+        ax.plot(x, (s["max"] - c) * scale, "_", color=colour, markersize=10)
+        if ref is not None and len(pairs) == 1:  # one pair: the nominal length as a line too
+            ax.axhline((ref - c) * scale, color="k", linestyle="--", linewidth=1, label=f"nominal {ref:g} mm")
+    ax.plot([], [], "_", color="0.4", markersize=10, label="thin bar: min to max; dot ± std")
+    ax.axhline(0.0, color="0.6", linewidth=0.6)
     ax.set_xticks(np.arange(len(conditions)), [str(c) for c in conditions])
     ax.set_xlabel("test condition")
-    ax.set_ylabel("length (mm)")
-    ax.legend(fontsize=8)
+    ax.set_ylabel(f"length − pair mean ({unit})")
+    ax.set_title("Length per condition, as deviation from each pair's mean", fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return ax
 
 
