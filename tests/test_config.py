@@ -90,8 +90,8 @@ def test_analyse_command_on_a_synth_wing(tmp_path, capsys):
     from wingphoto.io import write_points_csv
     from wingphoto.synth import wing_motion
 
-    # two whole strokes: the zero of the stroke angle is the mean direction (mid-stroke)
-    m = wing_motion(n_frames=200, stroke_amplitude_deg=86, pitch_deg=27, deviation_deg=4.0, phase_deg=66.0)
+    # one whole stroke: the zero of the stroke angle is the mean direction (mid-stroke)
+    m = wing_motion(n_frames=100, stroke_amplitude_deg=86, pitch_deg=27, deviation_deg=4.0, phase_deg=66.0)
     pts = m.points()
     # the user's own numbering: every marker number shifted by 100
     pts["point"] += 100

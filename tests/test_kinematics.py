@@ -104,7 +104,7 @@ def test_sigma_matches_monte_carlo():
     base = _kin(m, stroke_plane=m.stroke_normal)
     rng = np.random.default_rng(123)
     draws = []
-    for _ in range(60):
+    for _ in range(40):
         noisy = m.points()
         noisy[["X", "Y", "Z"]] += rng.normal(scale=sd, size=(len(noisy), 3))
         draws.append(_kin(m, points=noisy, stroke_plane=m.stroke_normal)["value"].to_numpy())

@@ -88,6 +88,7 @@ from .kinematics import (
     kinematic_reversals,
     kinematics_wide,
     phase_average,
+    plot_kinematics,
     resample_phase,
     stroke_phase,
     wing_kinematics,

@@ -107,8 +107,9 @@ class AnalysisSettings:
         of the leading edge is used.
     stroke_plane : (float, float, float) or None
         Normal of the stroke plane (left camera frame); default fitted.
-    reference_tol_mm : float
-        Largest displacement of a still reference, mm (default 0.5).
+    reference_tol_mm : float or None
+        Largest displacement of a still reference, mm; default None: derived from the
+        references' own noise (:func:`wingphoto.analysis.reference_stillness`).
     fps : float or None
         Frame rate (frames per second), for times in seconds; default None (frames).
     point_sigma_px : float
@@ -147,7 +148,7 @@ class AnalysisSettings:
     root: int | None = None
     hinge: tuple | None = None
     stroke_plane: tuple | None = None
-    reference_tol_mm: float = 0.5
+    reference_tol_mm: float | None = None
     fps: float | None = None
     point_sigma_px: float = 0.1
     phase_bins: int = 100
@@ -211,6 +212,8 @@ class AnalysisSettings:
         if self.stroke_plane is not None and math.hypot(*self.stroke_plane) < 1e-12:
             raise ValueError(f"{src}: stroke_plane must be a non-zero normal vector")
         for name, lo in (("reference_tol_mm", 0.0), ("point_sigma_px", 0.0)):
+            if getattr(self, name) is None and name == "reference_tol_mm":
+                continue
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v > lo):
                 raise ValueError(f"{src}: {name} must be a positive number, got {getattr(self, name)!r}")

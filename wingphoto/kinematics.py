@@ -33,6 +33,7 @@ __all__ = [
     "wing_kinematics",
     "kinematic_reversals",
     "kinematics_wide",
+    "plot_kinematics",
     "fit_wing_surface",
     "WingSurface",
     "stroke_phase",
@@ -275,7 +276,9 @@ def _cov_array(points, frames, ids):
 
     if not isinstance(points, pd.DataFrame):
         return None
-    C, _ = point_covariances(points)
+    C, _ = point_covariances(points, part="_track")
+    if C is None:
+        C, _ = point_covariances(points)
     if C is None:
         return None
     out = np.full((len(frames), len(ids), 3, 3), np.nan)
@@ -367,9 +370,10 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     ----------
     points : pandas.DataFrame or (T, N, 3) array_like
         3D points in mm, left camera frame. A DataFrame with the 3D covariance columns
-        ``cov_XX`` ... (``triangulate_tracks(..., full_covariance=True)``) or the
-        per-axis ``sigma_X, sigma_Y, sigma_Z`` (1-sigma, mm; correlations then ignored)
-        gives every value its sigma.
+        (``triangulate_tracks(..., full_covariance=True)``: the tracking term
+        ``cov_XX_track`` ... is used when present, else the total ``cov_XX`` ...) or
+        the per-axis ``sigma_X, sigma_Y, sigma_Z`` (``_track`` preferred; 1-sigma, mm;
+        correlations then ignored) gives every value its sigma.
     leading_edge : sequence of int
         Leading-edge markers, tip first (at least two, or one with ``root``/``hinge``).
     trailing_edge : sequence of int, optional
@@ -417,8 +421,12 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
     least-squares parabola through a chord row over its chord length, positive towards
     ``d x chord``. Bending is the quadratic term of the leading edge's deflection along
     that normal, as a deflection at the outermost marker (mm). The sigma is the
-    first-order propagation of the independent per-axis point sigmas, with the stroke
-    plane held fixed, points independent of each other.
+    first-order propagation of the points' covariances, with the stroke plane held
+    fixed and points independent of each other. That is right for the tracking term
+    (independent per point, frame to frame); the calibration's error is common to all
+    points and largely cancels in angles between nearby markers, so it is left out when
+    the points carry the tracking term separately (it would be overstated if treated
+    as independent per point).
 
     Examples
     --------
@@ -491,6 +499,52 @@ def kinematics_wide(kin):
     label = kin["quantity"].where(kin["station"].isna(), kin["quantity"] + "@" + kin["station"].round(3).astype(str))
     return kin.assign(label=label).pivot_table(index="frame", columns="label", values="value", dropna=False,
                                                sort=False)
+
+
+def plot_kinematics(kin, *, quantities=("stroke", "deviation", "pitch", "camber"), truth=None, axes=None):
+    """Plot kinematic quantities against the frame, one panel each, stations as lines.
+
+    Parameters
+    ----------
+    kin : pandas.DataFrame
+        The tidy table of :func:`wing_kinematics`.
+    quantities : sequence of str
+    truth : dict of str -> (T,) array_like, optional
+        True values per quantity (e.g. ``{"stroke": motion.kinematics["stroke_deg"]}``),
+        drawn dashed.
+    axes : sequence of matplotlib Axes, optional
+        One per quantity; default a new figure with a 2-column grid.
+
+    Returns
+    -------
+    ndarray of matplotlib Axes
+    """
+    import matplotlib.pyplot as plt
+
+    quantities = list(quantities)
+    if axes is None:
+        rows = (len(quantities) + 1) // 2
+        _, axes = plt.subplots(rows, 2, figsize=(11, 3.3 * rows), sharex=True, squeeze=False)
+    axes = np.ravel(axes)
+    for ax, q in zip(axes, quantities):
+        sub = kin[kin["quantity"] == q]
+        for st, g in sub.groupby(sub["station"].fillna(-1.0), sort=False):
+            line, = ax.plot(g["frame"], g["value"], lw=1.2, label=None if st == -1.0 else f"station {st:.2f}")
+            if g["sigma"].notna().any():
+                ax.fill_between(g["frame"], g["value"] - 3 * g["sigma"], g["value"] + 3 * g["sigma"],
+                                color=line.get_color(), alpha=0.2, lw=0)
+        if truth is not None and q in truth:
+            frames = np.sort(sub["frame"].unique())
+            ax.plot(frames, np.asarray(truth[q])[: len(frames)], "k--", lw=0.8, label="truth")
+        ax.set_title(q)
+        ax.set_ylabel(sub["unit"].iloc[0] if len(sub) else "")
+        if ax.get_legend_handles_labels()[1]:
+            ax.legend(fontsize=7)
+    for ax in axes[-2:]:
+        ax.set_xlabel("frame")
+    for ax in axes[len(quantities):]:
+        ax.set_visible(False)
+    return axes
 
 
 def kinematic_reversals(kin, *, window=5, prominence=None):

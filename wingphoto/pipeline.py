@@ -536,6 +536,7 @@ def analyse_points(points, settings, *, out=None, tracks=None):
         fit_wing_surface,
         kinematic_reversals,
         phase_average,
+        plot_kinematics,
         resample_phase,
         stroke_phase,
         wing_kinematics,
@@ -591,19 +592,8 @@ def analyse_points(points, settings, *, out=None, tracks=None):
                                    tension=s.cardinal_tension, frames=g["frame"].to_numpy())
                 parts.append(r.assign(quantity=q, station=np.nan if st == -1.0 else st))
             tables["phase_average"] = phase_average(pd.concat(parts, ignore_index=True), by=["quantity", "station"])
-        fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
-        for ax, q in zip(axes.ravel(), ("stroke", "deviation", "pitch", "camber")):
-            sub = kin[kin["quantity"] == q]
-            for st, g in sub.groupby(sub["station"].fillna(-1.0)):
-                ax.plot(g["frame"], g["value"], label=None if st == -1.0 else f"station {st:.2f}")
-            unit = sub["unit"].iloc[0] if len(sub) else ""
-            ax.set_title(q)
-            ax.set_ylabel(unit)
-            if sub["station"].notna().any():
-                ax.legend(fontsize=7)
-        for ax in axes[-1]:
-            ax.set_xlabel("frame")
-        figures.append((fig, "kinematics.png"))
+        axes = plot_kinematics(kin)
+        figures.append((axes[0].figure, "kinematics.png"))
         if len(s.trailing_edge) >= 2:
             surf = fit_wing_surface(points, leading_edge=s.leading_edge, trailing_edge=s.trailing_edge,
                                     chord_rows=s.chord_rows, root=s.root, hinge=s.hinge, model=s.surface_model,

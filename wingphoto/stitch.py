@@ -50,6 +50,9 @@ class Stitched:
     rms : (K,) ndarray
         RMS reference residual per test, mm.
     reference_ids : tuple of int
+    stroke : pandas.DataFrame or None
+        test, frame, stroke_deg (in the common stroke plane), phase, stroke_phase; when
+        the phase came from the stroke angle.
     """
 
     points: pd.DataFrame = field(repr=False)
@@ -58,6 +61,30 @@ class Stitched:
     residuals: pd.DataFrame = field(repr=False)
     rms: np.ndarray
     reference_ids: tuple
+    stroke: pd.DataFrame = field(default=None, repr=False)
+
+    def plot(self, *, ax=None):
+        """Stroke angle against stroke phase, one colour per test: the assembled stroke.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        import matplotlib.pyplot as plt
+
+        if self.stroke is None:
+            raise ValueError("no stroke angle: stitch with leading_edge=... to plot the assembled stroke")
+        if ax is None:
+            _, ax = plt.subplots(figsize=(7, 4))
+        for k, g in self.stroke.groupby("test"):
+            ax.plot(g["stroke_phase"], g["stroke_deg"], ".", ms=3, label=f"test {k}")
+        seen = self.stroke["stroke_deg"]
+        ax.set_title(f"assembled stroke: {np.nanmin(seen):.0f} to {np.nanmax(seen):.0f} deg "
+                     f"({np.nanmax(seen) - np.nanmin(seen):.0f} deg)")
+        ax.set_xlabel("stroke phase (0 = the stroke angle's maximum)")
+        ax.set_ylabel("stroke angle (deg)")
+        ax.legend(fontsize=8)
+        return ax
 
     def summary(self):
         """Per test: the rigid motion's size and the reference residuals, as text."""
@@ -304,6 +331,8 @@ def stitch_tests(tests, reference_ids, *, phase=None, leading_edge=None, root=No
                 errors[k] = exc
         if errors:
             _phase_from_others(phases, angles, [a[1] for a in arrays], errors)
+        stroke_rows = [pd.DataFrame({"test": k, "frame": arrays[k][1], "stroke_deg": angles[k], "phase": phases[k],
+                                     "stroke_phase": np.mod(phases[k], 1.0)}) for k in range(K)]
     for k, part in enumerate(parts):
         if phases:
             lut = pd.Series(phases[k], index=arrays[k][1])
@@ -314,7 +343,10 @@ def stitch_tests(tests, reference_ids, *, phase=None, leading_edge=None, root=No
         part["stroke_phase"] = np.mod(ph, 1.0)
     points = pd.concat(parts, ignore_index=True)
     residuals = pd.DataFrame(res_rows, columns=["test", "point", "residual", "n"])
+    stroke = None
+    if phase is None and leading_edge is not None:
+        stroke = pd.concat(stroke_rows, ignore_index=True)
     if not phases:
         log.info("no phase given and no leading_edge: the stitched points carry no stroke phase")
     return Stitched(points=points, rotations=Rs, translations=ts, residuals=residuals, rms=rms,
-                    reference_ids=tuple(int(r) for r in refs))
+                    reference_ids=tuple(int(r) for r in refs), stroke=stroke)

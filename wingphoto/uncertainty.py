@@ -42,6 +42,7 @@ __all__ = [
     "propagate_point_covariance",
     "add_point_uncertainty",
     "monte_carlo_errors",
+    "coverage",
     "DEFAULT_POINT_SIGMA_PX",
     "COV_NAMES",
     "point_covariances",
@@ -426,3 +427,36 @@ def monte_carlo_errors(X, rig, *, sigma_px=0.0, calibration=None, n_draws=200, s
         nr = rng.standard_normal((n, 2)) * s
         out[k] = _tri(xL + nl, xR + nr, r) - X
     return out
+
+
+def coverage(errors, sigma):
+    """Share of errors within 1, 2 and 3 sigma per axis, and the ratio of scatter to sigma.
+
+    Parameters
+    ----------
+    errors : (D, N, 3) or (N, 3) array_like
+        Errors (estimate minus truth), mm: Monte Carlo draws of N points, or one
+        realisation.
+    sigma : (N, 3) array_like
+        Reported 1-sigma per point and axis, mm.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per axis (X, Y, Z): within_1sigma, within_2sigma, within_3sigma (shares;
+        a Gaussian gives 0.683, 0.954, 0.997) and scatter_over_sigma (median over
+        points of the RMS error / sigma; 1 when the sigma is right).
+    """
+    E = np.asarray(errors, dtype=np.float64)
+    if E.ndim == 2:
+        E = E[None]
+    S = np.asarray(sigma, dtype=np.float64).reshape(E.shape[1:])
+    z = np.abs(E) / S
+    rows = []
+    for i, ax in enumerate("XYZ"):
+        zi = z[..., i]
+        zi = zi[np.isfinite(zi)]
+        rms = np.sqrt(np.nanmean(E[..., i] ** 2, axis=0)) / S[:, i]
+        rows.append({"axis": ax, "within_1sigma": float(np.mean(zi <= 1)), "within_2sigma": float(np.mean(zi <= 2)),
+                     "within_3sigma": float(np.mean(zi <= 3)), "scatter_over_sigma": float(np.nanmedian(rms))})
+    return pd.DataFrame(rows)

@@ -406,6 +406,55 @@ class WingMotion:
         S, B = self.scene
         return S + self.model.surface(sigma, xi, float(self.times[frame])) @ B.T
 
+    def tracks(self, rig, camera, *, sigma_px=0.0, seed=0):
+        """The markers' projections as a tracks table, with Gaussian pixel noise.
+
+        Parameters
+        ----------
+        rig : StereoRig
+            The rig the motion was placed for (:func:`wing_motion`'s).
+        camera : {'left', 'right'}
+        sigma_px : float
+            Noise added to x and y (px, 1-sigma); also written in the ``sigma`` column.
+        seed : int
+
+        Returns
+        -------
+        pandas.DataFrame
+            The tracks columns (camera, frame, point, x, y, score, status "ok", sigma).
+        """
+        if camera not in CAMERAS:
+            raise ValueError(f"camera must be 'left' or 'right', got {camera!r}")
+        t, n = self.points3d.shape[:2]
+        xy = rig.project(self.points3d.reshape(-1, 3))[0 if camera == "left" else 1]
+        xy = xy + np.random.default_rng(seed).normal(scale=float(sigma_px), size=xy.shape)
+        return pd.DataFrame({"camera": camera, "frame": np.repeat(np.arange(t, dtype=np.int64), n),
+                             "point": np.tile(np.arange(n, dtype=np.int64), t), "x": xy[:, 0], "y": xy[:, 1],
+                             "score": 1.0, "status": "ok", "sigma": float(sigma_px)})
+
+    def signal(self, name):
+        """The true kinematic quantity ``name`` as a function of the stroke phase in cycles.
+
+        Parameters
+        ----------
+        name : str
+            A key of :attr:`kinematics` (``"stroke_deg"``, ``"pitch_deg"``, ...).
+
+        Returns
+        -------
+        callable
+            ``f(phase_cycles) -> values`` (phase 0 is frame 0's wing-beat phase), e.g.
+            for :func:`wingphoto.kinematics.compare_interpolation`.
+        """
+        if name not in self.kinematics:
+            raise ValueError(f"name must be one of {sorted(self.kinematics)}, got {name!r}")
+        hz = self.model.flap_hz
+
+        def f(phase):
+            return self.model.kinematics(np.asarray(phase, dtype=np.float64) / hz)[name]
+
+        return f
+
     def partial_tests(self, windows, *, moves=None, noise_mm=0.0, seed=0):
         """Split the motion into tests that each see the wing only over part of the stroke.
 
