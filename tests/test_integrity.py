@@ -101,11 +101,11 @@ def test_left_right_offset(frames, offset):
     left, right = frames
     # drop frames at the start of one view: right frame t then shows left frame t + offset
     if offset > 0:
-        l, r = left[: len(left) - offset], right[offset:]
+        left_view, right_view = left[: len(left) - offset], right[offset:]
     else:
-        l, r = left[-offset:], right[: len(right) + offset]
+        left_view, right_view = left[-offset:], right[: len(right) + offset]
     expected = offset
-    rep = check_stereo_sequences(l, r)
+    rep = check_stereo_sequences(left_view, right_view)
     assert rep.offset == expected and not rep.ok
     assert "offset by" in rep.summary()
 
@@ -120,3 +120,48 @@ def test_bad_input():
         check_sequence(42)
     with pytest.raises(ValueError, match="2-D grey frames"):
         check_sequence(np.zeros((3, 4, 5, 3)))
+
+
+def test_track_stereo_stops_on_a_mismatch_unless_forced(frames):
+    import wingphoto as wp
+    from wingphoto.synth.rig import load_rig
+
+    left, right = frames
+    rig = load_rig(SAMPLES.parent / "rig.json")
+    picks = SAMPLES / "picks.json"
+    with pytest.raises(ValueError, match=r"left and right sequences do not match: frame counts differ.*--force"):
+        wp.track_stereo(left[:20], right[:19], picks, rig, progress=False)
+    with pytest.raises(ValueError, match=r"right view seems offset by \+1 frame"):
+        wp.track_stereo(left[:40], right[1:41], picks, rig, progress=False)
+
+
+def test_cli_check_exit_codes(tmp_path, capsys):
+    from wingphoto.cli import main
+
+    folder = copy_left(tmp_path, n=12)
+    assert main(["check", str(folder)]) == 0
+    assert "no duplicates, blank frames, jumps, gaps or stray files found" in capsys.readouterr().out
+    shutil.copy(folder / "frame_0004.tif", folder / "frame_0004 copy.tif")
+    assert main(["check", str(folder)]) == 1
+    out = capsys.readouterr().out
+    assert "1 stray file(s) not fitting the numbering: frame_0004 copy.tif" in out
+    assert main(["check", str(folder), "--right", str(SAMPLES / "right")]) == 1
+    assert "frame counts differ: left 13, right 60" in capsys.readouterr().out
+
+
+def test_epipolar_offset_with_a_rig(frames, tmp_path):
+    from wingphoto.cli import main
+    from wingphoto.io import save_bouguet_stereo
+    from wingphoto.synth.rig import load_rig
+
+    left, right = frames
+    rig = load_rig(SAMPLES.parent / "rig.json")
+    for offset, (lv, rv) in {1: (left[:20], right[1:21]), -2: (left[2:22], right[:20])}.items():
+        rep = check_stereo_sequences(lv, rv, rig=rig)
+        assert rep.offset == offset and rep.offset_score == 1.0, rep.summary()
+        assert rep.ok == (offset == 0)
+    save_bouguet_stereo(rig, tmp_path / "calib.mat")
+    tifffile.imwrite(tmp_path / "l1.tif", left[1:13])
+    tifffile.imwrite(tmp_path / "r.tif", right[:12])
+    assert main(["check", str(tmp_path / "l1.tif"), "--right", str(tmp_path / "r.tif"),
+                 "--calib", str(tmp_path / "calib.mat")]) == 1

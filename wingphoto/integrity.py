@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .io.sequence import SequenceWarning, parse_numbering, read_sequence
+from .io.sequence import SequenceWarning, read_sequence
 from .motion import _prepared, frame_content, static_background
 
 __all__ = [
@@ -311,7 +311,8 @@ class StereoSequenceReport:
         ``t + offset``. 0 when in step; None when it cannot be estimated (too few frames,
         no motion, or no clear peak).
     offset_score : float
-        Correlation of the two cameras' motion-energy signals at ``offset`` (1 = same).
+        With a rig: the share of blobs on their epipolar lines at ``offset``; without:
+        the correlation of the two cameras' motion-energy signals at ``offset``.
     problems : tuple of str
         Findings that make the pair unfit for triangulation (count, rate or time-stamp
         mismatch, a frame offset, duplicates, gaps or strays in either view).
@@ -337,7 +338,7 @@ class StereoSequenceReport:
         lines = ["left  " + self.left.summary().replace("\n", "\n      "),
                  "right " + self.right.summary().replace("\n", "\n      ")]
         off = "unknown" if self.offset is None else f"{self.offset:+d} frame(s)"
-        lines.append(f"left/right offset: {off} (motion correlation {self.offset_score:.3f})")
+        lines.append(f"left/right offset: {off} (score {self.offset_score:.3f})")
         lines += [f"PROBLEM: {p}" for p in self.problems]
         lines += [f"note: {p}" for p in self.notes]
         lines.append("left/right consistent" if self.ok else "left/right NOT consistent")
@@ -366,13 +367,79 @@ def _estimate_offset(a, b, max_lag):
     return best, scores[best], (max(others) if others else float("nan"))
 
 
-def check_stereo_sequences(left, right, *, max_offset=5, min_offset_score=0.2, **options):
+def _blobs(frame):
+    """Centroids (N, 2) of small bright (or, on a bright wing, dark) blobs: marker candidates."""
+    import cv2
+
+    a = np.asarray(frame, dtype=np.float32)
+    hp = a - cv2.GaussianBlur(a, (0, 0), 4)
+    sample = hp[::3, ::3].ravel()  # statistics on a ninth of the pixels: 10x faster, same thresholds
+    lo, hi = np.percentile(sample, [0.1, 99.9])
+    if -lo > hi:  # dark markers on a bright wing
+        hp, sample = -hp, -sample
+    mad = 1.4826 * float(np.median(np.abs(sample - np.median(sample))))
+    thr = max(6 * mad, 0.25 * float(hp.max()), 1e-6)
+    n, _, stats, centroids = cv2.connectedComponentsWithStats((hp > thr).astype(np.uint8))
+    keep = (stats[1:, cv2.CC_STAT_AREA] >= 3) & (stats[1:, cv2.CC_STAT_AREA] <= 0.01 * a.size)
+    return centroids[1:][keep]
+
+
+def _epipolar_offset(left, right, rig, max_lag, n_frames=20):
+    """Frame offset from epipolar geometry: blobs of left frame t against right frame t + lag.
+
+    Returns (offset, matched share at the offset, best share at any other lag); right
+    frame t shows left frame t + offset.
+    """
+    n = min(len(left), len(right))
+    if n < 3:
+        return None, float("nan"), float("nan")
+    idx = np.unique(np.linspace(0, n - 1, min(n, n_frames)).round().astype(int))
+    F = rig.fundamental_matrix
+    ul = {}
+    for t in idx:
+        b = _blobs(left[int(t)])
+        ul[int(t)] = rig.left.undistort_points(b) if len(b) else b
+    ur_cache = {}
+
+    def right_blobs(s):
+        if s not in ur_cache:
+            b = _blobs(right[s])
+            ur_cache[s] = rig.right.undistort_points(b) if len(b) else b
+        return ur_cache[s]
+
+    share = {}
+    for lag in range(-max_lag, max_lag + 1):
+        hits = total = 0
+        for t in idx:
+            s = int(t) + lag
+            if s < 0 or s >= len(right) or len(ul[int(t)]) == 0:
+                continue
+            ur = right_blobs(s)
+            if len(ur) == 0:
+                continue
+            lines = np.column_stack([ul[int(t)], np.ones(len(ul[int(t)]))]) @ F.T
+            d = np.abs(lines @ np.column_stack([ur, np.ones(len(ur))]).T) / np.hypot(lines[:, 0], lines[:, 1])[:, None]
+            hits += int(np.sum(d.min(axis=1) < 1.0))
+            total += len(d)
+        if total:
+            share[lag] = hits / total
+    if not share:
+        return None, float("nan"), float("nan")
+    lag = max(share, key=share.get)
+    others = [v for k, v in share.items() if k != lag]
+    return -lag, share[lag], (max(others) if others else float("nan"))
+
+
+def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_score=0.2, **options):
     """Check a left/right pair of sequences for everything that breaks stereo.
 
     Parameters
     ----------
     left, right : str, Path, Sequence or (T, H, W) array
         The two views (anything :func:`check_sequence` takes).
+    rig : StereoRig, optional
+        The calibrated rig. With it the frame offset comes from epipolar geometry (see
+        Notes), which is exact where the motion-energy estimate is not.
     max_offset : int, optional
         Largest frame offset looked for (default 5).
     min_offset_score : float, optional
@@ -387,8 +454,15 @@ def check_stereo_sequences(left, right, *, max_offset=5, min_offset_score=0.2, *
 
     Notes
     -----
-    The offset is estimated from the wing's motion, which both cameras see at the same
-    instants: the two views' motion energies (mean absolute change between consecutive
+    With ``rig``, the offset is the lag at which the most marker-like blobs of a left
+    frame lie within 1 px of the epipolar line of a blob in the right frame (20 frames
+    spread over the sequence, lags ``-max_offset..max_offset``). On the flapping sample
+    the true lag matches 100 % of the blobs (median epipolar distance 0.07 px) and the
+    best wrong lag 45-64 %, with 60, 40, 20 or 10 frames. ``offset_score`` is then the
+    matched share.
+
+    Without a rig, the offset is estimated from the wing's motion, which both cameras see
+    at the same instants: the two views' motion energies (mean absolute change between consecutive
     frames) are cross-correlated over lags ``-max_offset..max_offset`` and the best lag
     taken. On the flapping-wing samples (60 frames) it finds offsets -3..+3 exactly, but the
     peak is flat (correlation 0.991 at the true lag, 0.984 next to it): a sequence with
@@ -396,6 +470,12 @@ def check_stereo_sequences(left, right, *, max_offset=5, min_offset_score=0.2, *
     and time stamps.
     With the cameras' image numbers or time stamps (.cine, .mraw), those are compared too.
     """
+    if rig is not None and (isinstance(left, SequenceReport) or isinstance(right, SequenceReport)):
+        raise ValueError("with rig=, pass the frames (not SequenceReports): the epipolar check reads them")
+    if not isinstance(left, SequenceReport):
+        left = _open(left, "left")
+    if not isinstance(right, SequenceReport):
+        right = _open(right, "right")
     lrep = left if isinstance(left, SequenceReport) else check_sequence(left, **options)
     rrep = right if isinstance(right, SequenceReport) else check_sequence(right, **options)
     problems, notes = [], []
@@ -405,9 +485,16 @@ def check_stereo_sequences(left, right, *, max_offset=5, min_offset_score=0.2, *
         notes.append(f"frame sizes differ: left {lrep.shape[1]}x{lrep.shape[0]}, right {rrep.shape[1]}x{rrep.shape[0]} px")
     if lrep.fps and rrep.fps and abs(lrep.fps - rrep.fps) > 1e-6 * max(lrep.fps, rrep.fps):
         problems.append(f"frame rates differ: left {lrep.fps:g}, right {rrep.fps:g} frames/s")
-    offset, score, second = _estimate_offset(lrep.motion_energy, rrep.motion_energy, int(max_offset))
-    if offset is not None and not (score >= min_offset_score and score > second):
-        offset = None
+    if rig is not None:
+        offset, score, second = _epipolar_offset(left, right, rig, int(max_offset))
+        if offset is not None and not (score >= 0.5 and score - second >= 0.15):
+            notes.append(f"the epipolar frame-offset check is inconclusive (best lag matches {score:.0%} of the "
+                         f"blobs, the next {second:.0%})")
+            offset = None
+    else:
+        offset, score, second = _estimate_offset(lrep.motion_energy, rrep.motion_energy, int(max_offset))
+        if offset is not None and not (score >= min_offset_score and score > second):
+            offset = None
     if lrep.timestamps is not None and rrep.timestamps is not None:
         m = min(lrep.n_frames, rrep.n_frames)
         dt = np.asarray(rrep.timestamps[:m]) - np.asarray(lrep.timestamps[:m])

@@ -219,7 +219,7 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
 
         frames_left = read_sequence(frames_left) if isinstance(frames_left, (str, Path)) else frames_left
         frames_right = read_sequence(frames_right) if isinstance(frames_right, (str, Path)) else frames_right
-        report = check_stereo_sequences(frames_left, frames_right)
+        report = check_stereo_sequences(frames_left, frames_right, rig=rig)
         for note in report.notes:
             log.warning("%s", note)
         if not report.ok:

@@ -13,6 +13,9 @@ def add_parser(sub):
     )
     c.add_argument("frames", help="folder, glob pattern, multi-page TIFF, .cine, .mraw/.cih(x) or video (left view)")
     c.add_argument("--right", default=None, help="the right view, to check the pair against each other")
+    c.add_argument("--calib", default=None,
+                   help="Calib_Results_stereo.mat: with --right, find a frame offset from epipolar geometry (exact) "
+                   "instead of the motion of the images")
     c.add_argument("--jump", type=float, default=2.0, help="smallest whole-image jump reported, px (default 2)")
     c.add_argument("--duplicate-tolerance", type=float, default=0.0,
                    help="mean grey-level difference at or below which a frame is a duplicate (default 0: identical)")
@@ -32,6 +35,11 @@ def run(args):
         print(report.summary())
         bad = bool(report.strays or report.gaps or len(report.duplicates))
         return 1 if bad else 0
-    report = check_stereo_sequences(args.frames, args.right, **options)
+    rig = None
+    if args.calib is not None:
+        from ..io import load_bouguet_stereo
+
+        rig = load_bouguet_stereo(args.calib)[0]
+    report = check_stereo_sequences(args.frames, args.right, rig=rig, **options)
     print(report.summary())
     return 0 if report.ok else 1

@@ -149,6 +149,9 @@ class CineStore(FileStore):
         }
         if self.packing == "P10" and values == "linear":
             self.info["white level"] = 4095
+        # image number 0 is the trigger; its position in this file, when the file holds it
+        self.info["trigger index"] = int(-first_no) if first_no <= 0 < first_no + count else None
+        self.info["trigger time (s since 1970, UTC)"] = self.trigger_time
         self._finish(count)
 
     def _pixel_offsets(self, offsets, size):
