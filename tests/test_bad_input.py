@@ -31,6 +31,7 @@ from wingphoto.cli import main  # noqa: E402
 from wingphoto.io import atomic as atomic_mod  # noqa: E402
 from wingphoto.io import atomic_write, read_tracks_csv, save_bouguet_stereo, write_tracks_csv  # noqa: E402
 
+needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
 FEW = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 IMAGE = (512, 480)
 
@@ -152,6 +153,7 @@ def test_output_that_is_a_folder_is_refused(tmp_path):
     _no_temp_files(tmp_path)
 
 
+@needs_fifo
 def test_output_that_is_a_fifo_is_refused_and_kept(tmp_path):
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
@@ -231,6 +233,7 @@ def test_read_only_folder_is_one_line(tmp_path):
         d.chmod(0o755)
 
 
+@needs_fifo
 def test_cli_output_folder_and_fifo_refused(files, capsys):
     code, _, err = _cli(capsys, *_triangulate(files, out=files["dir"]))
     assert code == 1
@@ -590,6 +593,7 @@ def _tracks_for_video():
                          "status": "ok"})
 
 
+@needs_fifo
 def test_video_refuses_folder_fifo_and_huge_scale(tmp_path):
     frames = [np.zeros((40, 50), np.uint8)] * 2
     with pytest.raises(IsADirectoryError, match="is a folder"):

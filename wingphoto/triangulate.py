@@ -273,7 +273,8 @@ def _select_cameras(tl, tr):
         if set(cams) <= {"left", "right"}:
             raise ValueError(
                 f"{name} holds the tracks of camera {cams[0]!r}, not {want!r}: the left and right tracks are "
-                f"swapped or the same file was given twice; pass the {want} camera's tracks as {name}"
+                f"swapped, the same file was given twice, or the {want} sequence was tracked with --camera "
+                f"{cams[0]}; pass the {want} camera's tracks as {name}"
             )
         if len(cams) > 1:
             raise ValueError(f"{name} holds several cameras {cams} and none is named {want!r}; give one camera per table")
