@@ -455,6 +455,7 @@ def test_reprojection_limit_follows_the_tracks_sigma(rig, scene):
     (lambda tl, tr: (tl.iloc[:0], tr), "tracks_left has no rows"),
     (lambda tl, tr: (tl.assign(camera="cam0"), tr.assign(camera="cam0", x=tl["x"], y=tl["y"])), "both camera 'cam0'"),
     (lambda tl, tr: (_no_camera(tl), _no_camera(tl)), "identical positions"),
+    (lambda tl, tr: (pd.concat([tl, tl]), tr), r"repeating a \(frame, point\) .*concatenated"),
 ])
 def test_mismatched_tracks_are_refused(rig, scene, edit, match):
     tl, tr = edit(_tracks(rig, scene, "left"), _tracks(rig, scene, "right"))

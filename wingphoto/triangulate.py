@@ -171,6 +171,8 @@ def triangulate_tracks(tracks_left, tracks_right, rig, *, ok_status=("ok", "manu
     tl = _check_tracks_table(tracks_left, "tracks_left")
     tr = _check_tracks_table(tracks_right, "tracks_right")
     tl, tr = _select_cameras(tl, tr)
+    _check_unique(tl, "tracks_left")
+    _check_unique(tr, "tracks_right")
     if len(tl) or len(tr):
         _check_overlap(tl, tr)
     _check_in_image(tl, rig.left, "tracks_left")
@@ -288,6 +290,17 @@ def _select_cameras(tl, tr):
             "pass each camera's own tracks"
         )
     return tl, tr
+
+
+def _check_unique(t, name):
+    """Refuse repeated (frame, point) rows: they would pair every copy with every other."""
+    dup = t.duplicated(["frame", "point"], keep=False).to_numpy()
+    if dup.any():
+        row = t[dup].iloc[0]
+        raise ValueError(
+            f"{name} has {int(dup.sum())} rows repeating a (frame, point) (e.g. frame {row['frame']}, point "
+            f"{row['point']}): a tracks table has one row per camera, frame and point; were two files concatenated?"
+        )
 
 
 def _span(values):
