@@ -107,9 +107,10 @@ def test_dry_run_records_the_timeline_with_trigger():
     np.testing.assert_array_equal(sets.pan_ms, s.pan_ms)
     np.testing.assert_allclose(sets.tilt_duty, s.tilt_duty)
     ev = tl.event.tolist()
-    assert ev[:3] == ["tilt_pwm_start", "pan_pwm_start", "trigger_high"]
+    assert ev[:4] == ["tilt_pwm_start", "trigger_high", "set", "pan_pwm_start"]
     assert ev[-2:] == ["trigger_low", "stop"]
-    assert tl.time_s.iloc[1] - tl.time_s.iloc[0] == pytest.approx(0.016)
+    assert tl.time_s.iloc[3] - tl.time_s.iloc[0] == pytest.approx(0.016)
+    assert tl.time_s.is_monotonic_increasing
     assert tl.time_s.iloc[-1] == pytest.approx(22.0)
     # what the backend itself received: 21 changes after the start, trigger around them
     got = [e["event"] for e in be.events]
@@ -323,7 +324,7 @@ def test_cli_dryrun_prints_and_writes_the_timeline(tmp_path, capsys):
     tl = pd.read_csv(out)
     sets = tl[tl.event == "set"]
     np.testing.assert_allclose(sets.pan_duty, pan_tilt_schedule().pan_duty)
-    assert tl.event.iloc[2] == "trigger_high"
+    assert tl.event.iloc[1] == "trigger_high"
 
 
 def test_cli_nidaq_and_serial_with_fake_hardware(monkeypatch, capsys):

@@ -55,6 +55,9 @@ from .calibrate import (
     find_corners,
     suggest_suppress,
 )
+from .calibcheck import cross_validate
+from .capture import Selection, select_calibration_frames
+from . import pantilt
 from . import plots
 from .track import (
     apply_corrections,

@@ -599,6 +599,7 @@ def run_schedule(schedule, backend, *, trigger=False, realtime=None, sleep=time.
             log("trigger_low")
         log("stop")
     tl = pd.DataFrame(rows, columns=["time_s", "event", "step", "pan_ms", "tilt_ms"])
+    tl = tl.sort_values("time_s", kind="stable").reset_index(drop=True)  # the pan start is 16 ms late
     tl["pan_duty"] = tl["pan_ms"] / PWM_PERIOD_MS
     tl["tilt_duty"] = tl["tilt_ms"] / PWM_PERIOD_MS
     tl.attrs.update(backend=backend.name, realtime=real)
