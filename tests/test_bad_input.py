@@ -476,6 +476,39 @@ def test_cli_mismatches_name_the_files(files, capsys, rig, scene):
     assert files["out"].read_text() == "old result\n"
 
 
+@pytest.mark.parametrize("variant, match", [
+    ("semicolons", "separated by semicolons; wingphoto reads comma-separated files"),
+    ("tabs", "separated by tabs"),
+    ("points", "looks like a 3D points file, not tracks"),
+    ("latin1", "cannot read .* as a tracks CSV table"),
+    ("header", "tracks_left has no rows"),
+    ("truncated", r"unknown status value\(s\) \['<empty>'\]"),
+    ("bom", None),
+    ("crlf", None),
+])
+def test_tracks_csv_variants(files, capsys, rig, scene, variant, match):
+    t = read_tracks_csv(files["left"])
+    text = t.to_csv(index=False)
+    lines = text.splitlines()  # "truncated": cut in the middle of a row, after its x
+    data = {
+        "semicolons": t.to_csv(index=False, sep=";", decimal=",").encode(),
+        "tabs": t.to_csv(index=False, sep="\t").encode(),
+        "points": wp.triangulate_tracks(t, read_tracks_csv(files["right"]), rig).to_csv(index=False).encode(),
+        "latin1": text.replace("left", "l\xe9ft").encode("latin1"),
+        "header": (text.splitlines()[0] + "\n").encode(),
+        "truncated": "\n".join(lines[: len(lines) // 2] + [",".join(lines[len(lines) // 2].split(",")[:4])]).encode(),
+        "bom": ("\ufeff" + text).encode(),
+        "crlf": text.replace("\n", "\r\n").encode(),
+    }[variant]
+    files["left"].write_bytes(data)
+    code, out, err = _cli(capsys, *_triangulate(files))
+    if match is None:  # harmless variants are read as they are
+        assert code == 0, err
+        return
+    assert code == 1 and files["out"].read_text() == "old result\n"
+    assert re_search(match, _one_line_error(err, files["left"])), err
+
+
 _STATUSES = st.sampled_from(["ok", "flagged", "lost", "manual", "interpolated"])
 
 

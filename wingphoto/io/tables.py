@@ -75,6 +75,20 @@ def empty_points():
     return _empty_table(_POINT_KINDS)
 
 
+def _looks_like(columns, what):
+    """A hint when a table's header shows what the file really is."""
+    names = [str(c) for c in columns]
+    if len(names) == 1:
+        for sep, label in ((";", "semicolons"), ("\t", "tabs"), ("|", "bars")):
+            if sep in names[0]:
+                return f" (its fields are separated by {label}; wingphoto reads comma-separated files)"
+    if what == "tracks" and {"X", "Y", "Z"} <= set(names):
+        return " (it looks like a 3D points file, not tracks)"
+    if what == "points" and {"x", "y", "status"} <= set(names):
+        return " (it looks like a tracks file, not 3D points)"
+    return ""
+
+
 def _coerce_table(df, kinds, what, source, optional=None):
     """Check the standard columns and cast them to their dtypes (extra columns untouched).
 
@@ -87,7 +101,8 @@ def _coerce_table(df, kinds, what, source, optional=None):
         raise ValueError(f"{what} must be a pandas DataFrame, got {type(df).__name__}")
     missing = [c for c in kinds if c not in df.columns]
     if missing:
-        raise ValueError(f"{source} lacks the column(s) {missing}; a {what} table needs {list(kinds)}")
+        raise ValueError(f"{source} lacks the column(s) {missing}; a {what} table needs {list(kinds)}"
+                         + _looks_like(df.columns, what))
     out = df.copy()
     present = {c: k for c, k in (optional or {}).items() if c in out.columns}
     for col, kind in {**kinds, **present}.items():
