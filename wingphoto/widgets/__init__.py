@@ -22,6 +22,8 @@ from .state import (
 __all__ = [
     "Picker",
     "TrackReview",
+    "WindowPicker",
+    "headless",
     "Pick",
     "PickerState",
     "Correction",
@@ -39,6 +41,14 @@ def __getattr__(name):
         from .picker import Picker
 
         return Picker
+    if name == "headless":
+        from .picker import headless
+
+        return headless
+    if name == "WindowPicker":
+        from .window import WindowPicker
+
+        return WindowPicker
     if name == "TrackReview":
         from .review import TrackReview
 

@@ -331,9 +331,15 @@ class ImageView:
 
             plt.close(self.fig)
 
-    def _ipython_display_(self):  # display(picker) shows the widget
-        from IPython.display import display
+    def _ipython_display_(self):
+        """display(view) shows the widget; headless (nbmake, CI) the figure and status as they are."""
+        from IPython.display import HTML, display
 
+        if headless():
+            self.render()
+            display(HTML(self.status.value))
+            display(self.fig)
+            return
         display(self.widget)
 
 
@@ -643,7 +649,8 @@ class Picker(ImageView):
         self._apply(self.state.undo)
 
     def _write(self, path):
-        """Save the picks as JSON (see :meth:`ImageView.save`)."""
+        """Save the picks as JSON (see :meth:`ImageView.save`); the folder is made if needed."""
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         self.state.save(path)
         message = f"saved {self.state.n_rows} markers to {path}"
         if not self.state.is_complete:

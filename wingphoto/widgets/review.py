@@ -42,7 +42,10 @@ def default_retrack():
         from ..track import retrack_from
     except ImportError:
         return None
-    return retrack_from
+    import functools
+
+    # no progress bar: a re-tracking takes ~1 s, and a bar left in a notebook's output stays at 0 %
+    return functools.partial(retrack_from, progress=False)
 
 
 class TrackReview(ImageView):
