@@ -101,7 +101,7 @@ def test_analyse_command_on_a_synth_wing(tmp_path, capsys):
         length_pairs=[(i + 100, j + 100) for i, j in s.length_pairs], nominal_lengths={"118-119": 10.0},
         reference_ids=[r + 100 for r in s.reference_ids], leading_edge=[p + 100 for p in s.leading_edge],
         trailing_edge=[p + 100 for p in s.trailing_edge], chord_rows=[[p + 100 for p in r] for r in s.chord_rows],
-        hinge=s.hinge, phase_bins=40, mesh_shape=(5, 3))
+        hinge=s.hinge, phase_bins=40, mesh_shape=(5, 3), fps=3000.0)
     (tmp_path / "analysis.toml").write_text(shifted.to_toml())
     rc = main(["analyse", str(tmp_path / "points3d.csv"), "--config", str(tmp_path / "analysis.toml"),
                "--out", str(tmp_path / "out")])
@@ -114,6 +114,7 @@ def test_analyse_command_on_a_synth_wing(tmp_path, capsys):
                  "surface/wing.vtu.series"]:
         assert (out / name).is_file(), name
     kin = pd.read_csv(out / "kinematics.csv")
+    np.testing.assert_allclose(kin["time_s"], kin["frame"] / 3000.0)
     stroke = kin[kin["quantity"] == "stroke"].sort_values("frame")["value"].to_numpy()
     assert np.abs(stroke - m.kinematics["stroke_deg"]).max() < 0.75  # 2 mm tip bending tilts the span axis
     stats = pd.read_csv(out / "length_statistics.csv")

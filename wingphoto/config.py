@@ -111,10 +111,12 @@ class AnalysisSettings:
         Largest displacement of a still reference, mm; default None: derived from the
         references' own noise (:func:`wingphoto.analysis.reference_stillness`).
     fps : float or None
-        Frame rate (frames per second), for times in seconds; default None (frames).
+        Frame rate (frames per second): the analysis tables gain ``time_s``; default
+        None (frames only).
     point_sigma_px : float
         2D positional uncertainty (1 sigma, px, per axis) assumed where tracks carry no
-        ``sigma`` (default 0.1 px).
+        ``sigma`` (default 0.1 px), when points are triangulated with a calibration
+        (``triangulate_tracks(..., point_sigma_px=...)``).
     phase_bins : int
         Samples per stroke of the phase grid (default 100).
     interpolation : {"linear", "cubic", "cardinal"}

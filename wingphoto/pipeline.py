@@ -519,7 +519,8 @@ def analyse_points(points, settings, *, out=None, tracks=None):
     dict of str -> pandas.DataFrame
         Only what the settings allow: ``reference_stillness`` (reference_ids),
         ``length_statistics`` (length_pairs; nominal columns where known; expected_std
-        with point uncertainties), ``kinematics`` and ``reversals`` (leading_edge),
+        with point uncertainties), ``kinematics`` and ``reversals`` (leading_edge;
+        with ``fps`` also ``time_s``),
         ``phase_average`` (when the stroke shows two reversals), ``surface_residuals``
         (trailing_edge at >= 2 stations), ``tracking`` (tracks).
     """
@@ -577,8 +578,11 @@ def analyse_points(points, settings, *, out=None, tracks=None):
     if s.leading_edge:
         kin = wing_kinematics(points, leading_edge=s.leading_edge, trailing_edge=s.trailing_edge or None,
                               chord_rows=s.chord_rows, root=s.root, hinge=s.hinge, stroke_plane=s.stroke_plane)
-        tables["kinematics"] = kin
         tables["reversals"] = kinematic_reversals(kin)
+        if s.fps is not None:  # times in seconds beside the frame numbers
+            kin = kin.assign(time_s=kin["frame"] / s.fps)
+            tables["reversals"]["time_s"] = tables["reversals"]["frame"] / s.fps
+        tables["kinematics"] = kin
         stroke = kin[kin["quantity"] == "stroke"]
         try:
             phase = stroke_phase(stroke["value"].to_numpy(), stroke["frame"].to_numpy())
