@@ -330,6 +330,7 @@ def _edited_mat(path, **changes):
     ({"R": -np.eye(3), "om": None}, r"not a rotation matrix .*det\(R\) = -1"),
     ({"R": np.eye(3)}, "om and R disagree"),
     ({"T": np.array([[np.nan], [0.0], [0.0]])}, "T is not finite"),
+    ({"T": np.zeros((3, 1))}, "T is zero"),
     ({"fc_left": np.array([[np.nan], [1000.0]])}, "fc must be finite"),
 ])
 def test_invalid_calibration_values_refused_on_load(files, capsys, change, match):
@@ -455,12 +456,20 @@ def test_reprojection_limit_follows_the_tracks_sigma(rig, scene):
     (lambda tl, tr: (tl.iloc[:0], tr), "tracks_left has no rows"),
     (lambda tl, tr: (tl.assign(camera="cam0"), tr.assign(camera="cam0", x=tl["x"], y=tl["y"])), "both camera 'cam0'"),
     (lambda tl, tr: (_no_camera(tl), _no_camera(tl)), "identical positions"),
+    (lambda tl, tr: (tl.assign(x=np.nan), tr), r"no \(frame, point\) has a trusted position"),
     (lambda tl, tr: (pd.concat([tl, tl]), tr), r"repeating a \(frame, point\) .*concatenated"),
 ])
 def test_mismatched_tracks_are_refused(rig, scene, edit, match):
     tl, tr = edit(_tracks(rig, scene, "left"), _tracks(rig, scene, "right"))
     with pytest.raises(ValueError, match=match):
         wp.triangulate_tracks(tl, tr, rig)
+
+
+def test_degenerate_rig_gives_no_silent_nan_result(rig, scene):
+    flat = StereoRig(rig.left, rig.right, om=[0, 0, 0], T=[0, 0, 0])  # no baseline: no depth anywhere
+    tl, tr = _tracks(rig, scene, "left"), _tracks(rig, scene, "right")
+    with pytest.raises(ValueError, match="no trusted pair could be triangulated .*baseline"):
+        wp.triangulate_tracks(tl, tr, flat)
 
 
 def test_cli_mismatches_name_the_files(files, capsys, rig, scene):

@@ -394,6 +394,12 @@ def _check_reprojection(err, m, tl, tr, rig, ok_status, force):
     """Stop when the median reprojection error says the tracks do not fit the calibration."""
     finite = err[np.isfinite(err)]
     if finite.size == 0:
+        if m[["x_l", "y_l", "x_r", "y_r"]].notna().all(axis=1).any():
+            msg = (f"no trusted pair could be triangulated (the rays are parallel or the calibration is degenerate: "
+                   f"baseline {rig.baseline:.3g} mm); check the calibration file")
+            if not force:
+                raise ValueError(msg)
+            log.warning(msg)
         return
     median = float(np.median(finite))
     sigma = _median_sigma(tl, tr)

@@ -510,6 +510,9 @@ def load_bouguet_stereo(path):
         )
     if not np.all(np.isfinite(T)):
         raise ValueError(f"{path}: variable T is not finite ({T}); the file does not hold a valid calibration")
+    if not np.linalg.norm(T) > 0:
+        raise ValueError(f"{path}: variable T is zero: the two cameras would share one centre (no baseline), so "
+                         "nothing can be triangulated; the file does not hold a stereo calibration")
     rig = StereoRig(left, right, om=om, T=T)
     uncertainty = {f"{k}_left": v for k, v in unc_left.items()}
     uncertainty.update({f"{k}_right": v for k, v in unc_right.items()})
