@@ -181,3 +181,23 @@ def test_add_point_uncertainty_full_covariance():
     assert np.isnan(out.loc[3, "sigma_X"]) and out["sigma_X_calib"].isna().all()
     with pytest.raises(ValueError, match="point_sigma_px must be a positive"):
         add_point_uncertainty(pts, tl, tr, rig, point_sigma_px=0)
+
+
+def test_triangulate_command_with_uncertainty_from_a_toolbox_mat(tmp_path, capsys, caplog):
+    from wingphoto.cli import main
+    from wingphoto.io import read_points_csv, save_bouguet_stereo, write_tracks_csv
+
+    rig = thesis_rig()
+    m = wing_motion(rig, n_frames=2, phase_deg=80.0)
+    save_bouguet_stereo(rig, tmp_path / "Calib_Results_stereo.mat",
+                        uncertainty={"fc_left": [3.0, 3.0], "cc_left": [4.0, 4.0], "om": [0.002] * 3, "T": [0.5, 0.2, 1.2]})
+    write_tracks_csv(m.tracks(rig, "left", sigma_px=0.05, seed=1), tmp_path / "l.csv")
+    write_tracks_csv(m.tracks(rig, "right", sigma_px=0.05, seed=2), tmp_path / "r.csv")
+    with caplog.at_level(logging.WARNING, logger="wingphoto.uncertainty"):
+        rc = main(["triangulate", "--calib", str(tmp_path / "Calib_Results_stereo.mat"), "--left", str(tmp_path / "l.csv"),
+                   "--right", str(tmp_path / "r.csv"), "--out", str(tmp_path / "p.csv"), "--uncertainty"])
+    assert rc == 0 and "median 1-sigma" in capsys.readouterr().out
+    assert "diagonal covariance" in caplog.text
+    pts = read_points_csv(tmp_path / "p.csv")
+    assert {"sigma_X", "sigma_Z_calib", "cov_XZ_track"} <= set(pts.columns)
+    assert (pts["sigma_Z_calib"] > pts["sigma_Z_track"]).all()

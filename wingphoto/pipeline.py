@@ -241,7 +241,7 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
     return pd.concat([tl, tr], ignore_index=True), points
 
 
-def triangulate_files(calib, left, right, *, out=None, force=False):
+def triangulate_files(calib, left, right, *, out=None, force=False, uncertainty=False):
     """Triangulate two tracks CSV files with a stereo calibration .mat.
 
     Parameters
@@ -255,6 +255,11 @@ def triangulate_files(calib, left, right, *, out=None, force=False):
     force : bool
         Go on despite a failed reprojection check (see
         :func:`wingphoto.triangulate.triangulate_tracks`).
+    uncertainty : bool
+        Add each point's 1-sigma and 3D covariance (``sigma_X`` ..., ``cov_XX`` ...,
+        tracking and calibration parts) from the tracks' ``sigma`` and the file's
+        3-sigma errors; a toolbox .mat has no parameter correlations, so a diagonal
+        covariance is used (and a warning logged).
 
     Returns
     -------
@@ -269,10 +274,11 @@ def triangulate_files(calib, left, right, *, out=None, force=False):
     """
     if out is not None:
         check_output_path(out)
-    rig, _ = load_bouguet_stereo(calib)
+    rig, errors = load_bouguet_stereo(calib)
     tracks_left, tracks_right = read_tracks_csv(left), read_tracks_csv(right)
     try:
-        points = triangulate_tracks(tracks_left, tracks_right, rig, force=force)
+        points = triangulate_tracks(tracks_left, tracks_right, rig, force=force,
+                                    calibration=(rig, errors) if uncertainty else None, full_covariance=uncertainty)
     except ValueError as exc:
         raise ValueError(f"{exc} [left {left}, right {right}, calibration {calib}]") from None
     if out is not None:
