@@ -170,9 +170,10 @@ def render_calibration_video(
     Examples
     --------
     >>> from wingphoto.pantilt import pan_tilt_schedule
-    >>> v = render_calibration_video(schedule=pan_tilt_schedule(1, 2, hold_s=0.5), fps=20, frames_per_step=2)
-    >>> len(v), v.step.tolist(), v.still.tolist()
-    (6, [1, 1, 2, 2, 3, 3], [True, True, False, True, False, True])
+    >>> v = render_calibration_video(schedule=pan_tilt_schedule(1, 2, hold_s=0.5), fps=20, frames_per_step=2,
+    ...                              move_s=0.1)
+    >>> len(v), v.step.tolist(), (v.motion_px > 1).tolist()  # the first frame of a later step is mid-move
+    (6, [1, 1, 2, 2, 3, 3], [False, False, True, False, True, False])
     """
     from ..pantilt import pan_tilt_schedule
 
