@@ -121,6 +121,7 @@ class SequenceReport:
     content: np.ndarray
     source: str = ""
     variable_frame_rate: bool = False
+    camera_numbers: bool = False
 
     @property
     def ok(self):
@@ -296,6 +297,7 @@ def check_sequence(frames, *, duplicate_tolerance=0.0, blank_fraction=0.1, jump_
         duplicates=np.asarray(duplicates, dtype=np.int64), blank=blank.astype(np.int64), jumps=jumps,
         gaps=gaps, strays=strays, camera_offset=offsets, motion_energy=energy, content=content,
         source=source, variable_frame_rate=bool(getattr(seq, "variable_frame_rate", False)),
+        camera_numbers=getattr(seq, "info", {}).get("format") in ("cine", "mraw"),
     )
 
 
@@ -308,8 +310,9 @@ class StereoSequenceReport:
     left, right : SequenceReport
     offset : int or None
         Estimated constant frame offset: right frame ``t`` shows the instant of left frame
-        ``t + offset``. 0 when in step; None when it cannot be estimated (too few frames,
-        no motion, or no clear peak).
+        ``t + offset``. 0 when in step. From epipolar geometry when a rig is given, from
+        the trigger-relative image numbers of two .cine/.mraw files, else None (the images'
+        motion alone gives only a hint, reported in ``notes``).
     offset_score : float
         With a rig: the share of blobs on their epipolar lines at ``offset``; without:
         the correlation of the two cameras' motion-energy signals at ``offset``.
@@ -461,13 +464,12 @@ def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_sc
     best wrong lag 45-64 %, with 60, 40, 20 or 10 frames. ``offset_score`` is then the
     matched share.
 
-    Without a rig, the offset is estimated from the wing's motion, which both cameras see
-    at the same instants: the two views' motion energies (mean absolute change between consecutive
-    frames) are cross-correlated over lags ``-max_offset..max_offset`` and the best lag
-    taken. On the flapping-wing samples (60 frames) it finds offsets -3..+3 exactly, but the
-    peak is flat (correlation 0.991 at the true lag, 0.984 next to it): a sequence with
-    little or irregular motion may give None or a wrong offset, so read it with the counts
-    and time stamps.
+    Without a rig, two .cine/.mraw files give the offset from their trigger-relative image
+    numbers. Otherwise the images' motion energies (mean absolute change between
+    consecutive frames) are cross-correlated over lags ``-max_offset..max_offset``, but
+    only as a hint in ``notes``: the peak is flat and view-dependent (on the flapping
+    sample: correlation 0.991 at the true lag, 0.984 next to it on 60 frames, and the
+    wrong lag on 91 % of 20-40-frame windows), so ``offset`` stays None.
     With the cameras' image numbers or time stamps (.cine, .mraw), those are compared too.
     """
     if rig is not None and (isinstance(left, SequenceReport) or isinstance(right, SequenceReport)):
@@ -492,9 +494,21 @@ def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_sc
                          f"blobs, the next {second:.0%})")
             offset = None
     else:
-        offset, score, second = _estimate_offset(lrep.motion_energy, rrep.motion_energy, int(max_offset))
-        if offset is not None and not (score >= min_offset_score and score > second):
-            offset = None
+        guess, score, second = _estimate_offset(lrep.motion_energy, rrep.motion_energy, int(max_offset))
+        offset = None
+        if lrep.camera_numbers and rrep.camera_numbers:
+            # trigger-relative image numbers of two synchronized cameras: equal numbers, same instant
+            offset = int(rrep.frame_numbers[0] - lrep.frame_numbers[0])
+            score = 1.0
+        elif guess is not None and score >= min_offset_score and score > second:
+            # the motion energy's correlation peak is flat: on the flapping sample it finds a
+            # 1-frame offset on 60 frames but calls 40 in-step frames offset by +1, so it is a
+            # hint, not a finding
+            notes.append(
+                f"the images' motion peaks at a {guess:+d} frame offset (correlation {score:.3f}, next "
+                f"{second:.3f}); this is unreliable for offsets of a frame or two: check with the "
+                f"calibration (rig=, --calib), which finds the offset exactly"
+            )
     if lrep.timestamps is not None and rrep.timestamps is not None:
         m = min(lrep.n_frames, rrep.n_frames)
         dt = np.asarray(rrep.timestamps[:m]) - np.asarray(lrep.timestamps[:m])
