@@ -172,3 +172,12 @@ def test_offset_from_camera_image_numbers():
     rep = check_stereo_sequences(seq[0:5], seq[1:6])  # right starts one image number later
     assert rep.offset == 1 and not rep.ok
     assert check_stereo_sequences(seq[0:5], seq[0:5]).offset == 0
+
+
+def test_track_folder_stops_on_a_duplicated_frame(frames):
+    import wingphoto as wp
+
+    left = frames[0][:12].copy()
+    left[6] = left[5]
+    with pytest.raises(ValueError, match=r"duplicated frame\(s\) at index 6.*force=True \(--force\)"):
+        wp.track_folder(left, SAMPLES / "picks.json", camera="left", progress=False)
