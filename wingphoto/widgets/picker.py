@@ -82,6 +82,15 @@ def _display_range(img):
     return float(lo), float(hi if hi > lo else lo + 1)
 
 
+def _png(fig, dpi=80):
+    """The figure as an IPython PNG image (shown whatever the matplotlib backend, e.g. Agg)."""
+    from IPython.display import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    return Image(data=buf.getvalue(), format="png")
+
+
 def _number_label(ax, u, v, number, colour):
     """Write ``number`` just beside its own centre (u, v), on a dark patch, so it is unambiguous."""
     ax.annotate(str(number), (u, v), xytext=(4, -4), textcoords="offset points", ha="left", va="bottom",
@@ -338,7 +347,7 @@ class ImageView:
         if headless():
             self.render()
             display(HTML(self.status.value))
-            display(self.fig)
+            display(_png(self.fig))
             return
         display(self.widget)
 
@@ -725,6 +734,9 @@ class Picker(ImageView):
 
         if headless():
             fig = self.static_figure()
-            display(fig)
+            display(_png(fig))
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
             return
         display(self.widget)
