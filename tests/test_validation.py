@@ -109,3 +109,22 @@ def test_bad_input():
         score_tracks(pd.concat([_tracks(seq), _tracks(seq)]), seq, "left")
     with pytest.raises(ValueError, match="points_top"):
         score_tracks(_tracks(seq), seq, "top")
+
+
+def test_one_camera_sequence_and_pooling():
+    from wingphoto.validation import point_errors, summarize_errors
+
+    seq = _seq()
+    one = SimpleNamespace(camera="cam1", points=seq.points_left, visible=seq.visible_left)
+    dx = np.zeros((4, 3))
+    dx[0, 0] = 2.0
+    tr = _tracks(seq, dx=dx, sigma=0.5).assign(camera="cam1")
+    s = score_tracks(tr, one, "cam1")
+    assert s["confident_errors"] == 1 and s["n_ok"] == 12
+    # pooling two sequences' arrays gives the numbers of one table holding both
+    a = point_errors(tr, one, "cam1")
+    b = point_errors(_tracks(seq, sigma=0.5).assign(camera="cam1"), one, "cam1")
+    pooled = summarize_errors(*(np.concatenate([a[k].ravel(), b[k].ravel()]) for k in ("error", "ok", "visible", "sigma")))
+    assert pooled["n_ok"] == 24 and pooled["confident_errors"] == 1
+    assert pooled["rms_px"] == pytest.approx(np.sqrt(4.0 / 24))
+    assert pooled["within_3_sigma"] == pytest.approx(23 / 24)
