@@ -135,3 +135,16 @@ def test_bad_arguments():
         select_calibration_frames(noise, noise[::-1], PATTERN)
     with pytest.raises(ValueError, match="left must be"):
         select_calibration_frames(3, v.right, PATTERN)
+
+
+def test_recordings_read_from_folders(tmp_path):
+    """Any wingphoto.read_sequence source: here folders of TIFF frames."""
+    tifffile = pytest.importorskip("tifffile")
+    sch, v = _video()
+    for side, frames in (("left", v.left[:20]), ("right", v.right[:20])):
+        (tmp_path / side).mkdir()
+        for k, img in enumerate(frames):
+            tifffile.imwrite(tmp_path / side / f"frame_{k:04d}.tif", img)
+    sel = select_calibration_frames(str(tmp_path / "left"), tmp_path / "right", PATTERN)
+    assert sel.frames == (4, 9, 14, 19)
+    assert v.still[list(sel.frames)].all()
