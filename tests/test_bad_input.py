@@ -218,6 +218,23 @@ def test_folder_path_through_a_file_is_one_line(tmp_path):
     assert (tmp_path / "afile").read_text() == "keep"
 
 
+def test_no_permission_is_one_line(tmp_path, monkeypatch):
+    """The folder refuses the temporary file (as a read-only folder does for a normal user)."""
+    p = tmp_path / "out.csv"
+    p.write_text("old")
+
+    def denied(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / ".out.csv.x.tmp"))
+
+    monkeypatch.setattr(atomic_mod.tempfile, "mkstemp", denied)
+    with pytest.raises(OSError) as info:
+        with atomic_write(p, "w") as f:
+            f.write("new")
+    assert str(info.value) == (f"cannot write {p}: permission denied (the existing file is unchanged); "
+                               f"check the permissions of {tmp_path} or write elsewhere")
+    assert p.read_text() == "old"
+
+
 @pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root ignores folder permissions")
 def test_read_only_folder_is_one_line(tmp_path):
     d = tmp_path / "ro"
