@@ -778,3 +778,25 @@ def test_subprocess_random_bytes_tiff(track_inputs):
     code, err = _run(*_track(track_inputs, frames=bad))
     assert code == 1 and "Traceback" not in err and str(bad) in err, err
     assert track_inputs["out"].read_text() == "old tracks\n"
+
+
+_COORD = st.one_of(st.floats(-100, 150), st.just(float("nan")), st.just(float("inf")))
+
+
+@FEW
+@given(picks=st.lists(st.tuples(st.integers(-1, 3), _COORD, _COORD, st.integers(-2, 40)), min_size=1, max_size=4))
+def test_random_picks_give_tracks_or_a_clear_error(picks):
+    """Random picks tables (NaN, inf, outside the image, repeated numbers, bad sizes) through track_markers."""
+    frames = [np.pad(np.full((5, 5), 200, np.uint8), 20)] * 3  # a 45 x 45 image, one marker at (22, 22)
+    table = pd.DataFrame(picks, columns=["point", "x", "y", "half_size"])
+    try:
+        tracks = wp.track_markers(frames, table, progress=False)
+    except ValueError as exc:
+        assert "\n" not in str(exc) and str(exc)
+        return
+    assert set(wp.TRACK_COLUMNS) <= set(tracks.columns)
+    assert len(tracks) == 3 * table["point"].nunique()
+    assert set(tracks["status"]) <= {"ok", "flagged", "lost", "manual", "interpolated"}
+    ok = tracks[tracks["status"] == "ok"]
+    assert np.isfinite(ok[["x", "y"]].to_numpy()).all()
+    assert ((ok[["x", "y"]] >= -0.5) & (ok[["x", "y"]] <= 44.5)).all().all()
