@@ -37,11 +37,11 @@ def test_clean_samples_pass_without_warnings(frames):
     rep = check_sequence(seq)
     assert rep.ok, rep.summary()
     assert rep.n_frames == 60 and rep.frame_numbers.tolist() == list(range(60))
-    stereo = check_stereo_sequences(SAMPLES / "left", SAMPLES / "right")
+    stereo = check_stereo_sequences(rep, check_sequence(SAMPLES / "right"))
     assert stereo.ok and stereo.offset is None, stereo.summary()  # no rig: no offset claimed
     from wingphoto.synth.rig import load_rig
 
-    stereo = check_stereo_sequences(SAMPLES / "left", SAMPLES / "right", rig=load_rig(SAMPLES.parent / "rig.json"))
+    stereo = check_stereo_sequences(frames[0][:25], frames[1][:25], rig=load_rig(SAMPLES.parent / "rig.json"))
     assert stereo.ok and stereo.offset == 0, stereo.summary()
 
 
@@ -129,7 +129,7 @@ def test_track_stereo_stops_on_a_mismatch_unless_forced(frames):
     with pytest.raises(ValueError, match=r"left and right sequences do not match: frame counts differ.*--force"):
         wp.track_stereo(left[:20], right[:19], picks, rig, progress=False)
     with pytest.raises(ValueError, match=r"right view seems offset by \+1 frame"):
-        wp.track_stereo(left[:40], right[1:41], picks, rig, progress=False)
+        wp.track_stereo(left[:20], right[1:21], picks, rig, progress=False)
 
 
 def test_cli_check_exit_codes(tmp_path, capsys):
