@@ -800,3 +800,10 @@ def test_random_picks_give_tracks_or_a_clear_error(picks):
     ok = tracks[tracks["status"] == "ok"]
     assert np.isfinite(ok[["x", "y"]].to_numpy()).all()
     assert ((ok[["x", "y"]] >= -0.5) & (ok[["x", "y"]] <= 44.5)).all().all()
+
+
+def test_output_folder_that_is_a_file(tmp_path):
+    (tmp_path / "results").write_text("keep")
+    with pytest.raises(NotADirectoryError, match=r"results/run cannot be created: .*results exists and is not a folder"):
+        wp.pipeline.analyse_points(wp.empty_points(), {}, out=tmp_path / "results" / "run")
+    assert (tmp_path / "results").read_text() == "keep"

@@ -29,7 +29,7 @@ from .io import (
     write_points_csv,
     write_tracks_csv,
 )
-from .io.atomic import check_output_path
+from .io.atomic import check_output_path, ensure_output_folder
 from .triangulate import triangulate_tracks
 
 log = logging.getLogger(__name__)
@@ -380,8 +380,7 @@ def run_demo(data="data-samples", *, out="results", video=True, progress=True):
     from . import plots, plots3d
     from .analysis import align_rigid, find_reversals, length_statistics, reference_stillness, stroke_angle
     sample = load_sample(data)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_output_folder(out)
     lines = []
 
     # 1. stereo calibration
@@ -557,7 +556,7 @@ def analyse_points(points, settings, *, out=None, tracks=None):
         points = read_points_csv(points)
     out = None if out is None else Path(out)
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        ensure_output_folder(out)
         with atomic_write(out / "analysis.toml", "w") as f:
             f.write(settings.to_toml())
     s = settings

@@ -21,7 +21,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write", "check_output_path", "OutputError"]
+__all__ = ["atomic_write", "check_output_path", "ensure_output_folder", "OutputError"]
 
 #: errno values meaning "the data could not be stored" (rather than a bug in the caller).
 _STORAGE_ERRNOS = {
@@ -145,6 +145,37 @@ def _storage_error(exc, path):
     }.get(exc.errno, "write elsewhere or retry")
     old = "the existing file is unchanged" if path.exists() else "nothing was written"
     return OutputError(exc.errno, f"cannot write {path}: {why} ({old}); {hint}")
+
+
+def ensure_output_folder(path):
+    """Create the output folder ``path`` (and its parents) unless it exists; return it.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``path`` (or one of its parents) exists and is not a folder: one line naming it.
+    OSError
+        The folder cannot be created (no permission, read-only file system): one line.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp()) / "results" / "run1"
+    >>> ensure_output_folder(d).is_dir()
+    True
+    """
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocker = next((p for p in (path, *path.parents) if p.exists() and not p.is_dir()), path)
+        raise NotADirectoryError(
+            f"output folder {path} cannot be created: {blocker} exists and is not a folder; choose another "
+            "output folder"
+        ) from None
+    except OSError as exc:
+        raise OutputError(exc.errno, f"cannot create the output folder {path}: {exc.strerror}") from None
+    return path
 
 
 @contextlib.contextmanager
