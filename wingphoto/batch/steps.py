@@ -77,6 +77,7 @@ class _ThreadFilter(logging.Filter):
         return record.thread == self.ident
 
 
+_pyplot_lock = threading.Lock()
 _cv_lock = threading.Lock()
 _cv_users = 0
 _cv_saved = None
@@ -352,7 +353,8 @@ def _analyse(points, tracks, settings, work):
 
     analyse_points = getattr(pipeline, "analyse_points", None)
     if analyse_points is not None:
-        tables = analyse_points(points, settings, out=work / "analysis", tracks=tracks)
+        with _pyplot_lock:  # its figures go through pyplot, whose state threads share
+            tables = analyse_points(points, settings, out=work / "analysis", tracks=tracks)
         return sorted(tables)
     from ..analysis import length_statistics, reference_stillness
 

@@ -44,8 +44,11 @@ def run(args):
 
     from ..batch import run_batch
 
-    if not getattr(args, "verbose", False):
-        # Dask logs every worker start and stop at INFO level; -v shows them
+    if not getattr(args, "verbose", False) and not (args.workers == 1 and args.scheduler is None):
+        # Dask logs every worker start and stop at INFO level (its import sets that level,
+        # so quiet it after importing); -v shows them
+        import distributed  # noqa: F401
+
         logging.getLogger("distributed").setLevel(logging.ERROR)
     if args.scheduler is not None and args.workers is not None:
         raise ValueError("give either --scheduler (an existing cluster) or --workers (a local one), not both")
