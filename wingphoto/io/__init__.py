@@ -25,7 +25,7 @@ are only ever opened read-only.
 
 Conventions (pixel origin, frames, units, names): ``docs/conventions.md``.
 """
-from .atomic import atomic_write
+from .atomic import atomic_write, check_output_path, ensure_output_folder
 from .bouguet import BouguetCalib, load_bouguet_calib, load_bouguet_stereo, save_bouguet_calib, save_bouguet_stereo
 from .sequence import IMAGE_EXTENSIONS, Sequence, SequenceWarning, parse_numbering, read_sequence
 from .exchange import (
@@ -54,6 +54,8 @@ from .tables import (
 
 __all__ = [
     "atomic_write",
+    "check_output_path",
+    "ensure_output_folder",
     "find_samples",
     # image sequences
     "IMAGE_EXTENSIONS",
