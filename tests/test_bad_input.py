@@ -807,3 +807,16 @@ def test_output_folder_that_is_a_file(tmp_path):
     with pytest.raises(NotADirectoryError, match=r"results/run cannot be created: .*results exists and is not a folder"):
         wp.pipeline.analyse_points(wp.empty_points(), {}, out=tmp_path / "results" / "run")
     assert (tmp_path / "results").read_text() == "keep"
+
+
+@FEW
+@given(data=st.binary(max_size=300), suffix=st.sampled_from([".json", ".csv"]))
+def test_random_bytes_as_picks(tmp_path_factory, data, suffix):
+    p = tmp_path_factory.mktemp("picks") / f"picks{suffix}"
+    p.write_bytes(data)
+    try:
+        table = wp.load_picks(p, "left")
+    except (ValueError, FileNotFoundError) as exc:
+        assert str(p) in str(exc) and "\n" not in str(exc), str(exc)
+    else:  # only a well-formed table may come back
+        assert {"point", "x", "y"} <= set(table.columns) and np.isfinite(table[["x", "y"]].to_numpy()).all()
