@@ -718,6 +718,7 @@ def test_track_output_folder_refused_before_tracking(track_inputs, capsys):
     ("camera,point,frame,x,y\nleft,0,0,32.5,22.5\nleft,1,0,32.5,22.5\n", "points 0 and 1 .* on the same spot"),
     ("camera,point,frame,x,y\nleft,0,0,nan,22.5\nleft,1,0,50,22.5\n", "left point 0 has no valid position"),
     ("camera,point,frame,x,y\nleft,0,0,5000,22.5\n", "outside the 80x64 image"),
+    ("camera,point,frame,x,y\nleft,0,99,32.5,22.5\n", r"point 0 was picked in frame 99, but the sequence has frames 0\.\.5"),
 ])
 def test_bad_picks_are_named(track_inputs, capsys, text, match):
     """Issue 13 item 6 (wingphoto.picks): the picks file and the point are named."""

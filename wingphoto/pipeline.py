@@ -130,6 +130,21 @@ def _checked(frames, name, *, force):
     return seq, report
 
 
+def _check_pick_frames(table, n_frames, source, camera):
+    """Refuse picks made in a frame the sequence does not have (they would be applied elsewhere)."""
+    if not isinstance(table, pd.DataFrame) or "frame" not in table.columns or not len(table):
+        return
+    f = pd.to_numeric(table["frame"], errors="coerce").to_numpy(float)
+    bad = ~((f >= 0) & (f < n_frames))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        point, frame = table["point"].to_numpy()[k], table["frame"].to_numpy()[k]
+        raise ValueError(
+            f"{source}: {camera} point {point} was picked in frame {frame}, but the sequence has "
+            f"frames 0..{n_frames - 1}; pick it in this sequence (or fix its frame number)"
+        )
+
+
 def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, progress=True, check=True,
                  force=False, **options):
     """Track the picked markers through one camera's sequence.
@@ -166,6 +181,7 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     else:
         seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
     table = load_picks(picks, camera) if isinstance(picks, (str, Path)) else picks
+    _check_pick_frames(table, len(seq), picks if isinstance(picks, (str, Path)) else "the picks table", camera)
     tracks = track_markers(seq, table, camera=camera, checkpoint=checkpoint, progress=progress, **options)
     if out is not None:
         write_tracks_csv(tracks, out)
