@@ -118,6 +118,14 @@ def _resolve_source(source):
                 if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_EXTENSIONS
             ]
             if not files:
+                from .formats import is_container
+
+                recordings = sorted(p.name for p in path.iterdir() if p.is_file() and is_container(p))
+                if recordings:
+                    raise FileNotFoundError(
+                        f"no image files in folder {path}, but camera/video file(s) {', '.join(recordings[:5])}: "
+                        f"open one of them, e.g. read_sequence('{path / recordings[0]}')"
+                    )
                 raise FileNotFoundError(
                     f"no image files ({', '.join(IMAGE_EXTENSIONS)}) in folder {path}; check the "
                     f"folder, or pass a glob pattern such as '{path / 'frame*.tif'}'"
