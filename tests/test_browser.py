@@ -91,7 +91,7 @@ def lab(tmp_path_factory):
          "--ServerApp.port_retries=0"],
         cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 180  # a busy CI machine can take a minute to start it
     while True:
         try:
             urllib.request.urlopen(f"{base}/api/status?token={token}", timeout=2).read()
@@ -99,6 +99,7 @@ def lab(tmp_path_factory):
         except OSError:
             if proc.poll() is not None or time.monotonic() > deadline:
                 proc.kill()
+                proc.wait()
                 log.close()
                 pytest.fail("JupyterLab did not start:\n" + (root / "lab.log").read_text()[-3000:])
             time.sleep(0.5)
@@ -145,7 +146,7 @@ class Lab:
         self.step += 1
         self.d.save_screenshot(str(ARTIFACTS / f"{self.name}_{self.step:02d}_{what}.png"))
 
-    def wait(self, condition, what, timeout=60.0):
+    def wait(self, condition, what, timeout=120.0):
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -194,7 +195,7 @@ class Lab:
                 return e.text
         return ""
 
-    def wait_status(self, marker, expected, what, timeout=60.0):
+    def wait_status(self, marker, expected, what, timeout=120.0):
         return self.wait(lambda: (lambda t: t if all(x in t for x in expected) else "")(self.status_text(marker)),
                          f"{what} (status containing {expected})", timeout)
 
@@ -346,7 +347,7 @@ def test_review_in_jupyterlab(lab, browser):
     me.shot("selected")
     me.click(me.canvas(), tx, ty, (512, 512))
     status = me.wait_status("flagged/lost", ["point 2 corrected at frame 5", "1 corrections"], "the correction",
-                            timeout=90)
+                            timeout=180)
     me.shot("corrected")
     assert "re-tracked forward" in status, status
     assert "0 flagged/lost items" in status

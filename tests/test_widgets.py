@@ -803,3 +803,36 @@ def test_cli_pick_without_display_says_how_to_pick(tmp_path, monkeypatch, capsys
     assert "must end in .json or .csv" in capsys.readouterr().err
     assert main(["pick", str(tmp_path / "left.tif"), "--out", str(out), "--frame", "9"]) == 1
     assert "--frame 9 is outside" in capsys.readouterr().err
+
+
+def test_window_picker_routes_real_matplotlib_events(tmp_path):
+    """Mouse and key events as a GUI backend delivers them: press/move/release in screen px."""
+    from matplotlib.backend_bases import KeyEvent, MouseEvent
+
+    w = _window(tmp_path, n_points=2, half_size=3)
+    canvas = w.fig.canvas
+    w.fig.canvas.draw()
+
+    def screen(cam, x, y):
+        return w.axes[cam].transData.transform((x, y))
+
+    def mouse(kind, cam, x, y):
+        u, v = screen(cam, x, y)
+        MouseEvent(kind, canvas, u, v, button=1)._process()
+
+    for cam, pts in (("left", [(10.0, 5.0), (30.0, 20.0)]), ("right", [(12.0, 6.0), (31.0, 21.0)])):
+        for x, y in pts:
+            mouse("button_press_event", cam, x, y)
+            mouse("button_release_event", cam, x, y)
+    assert w.state.is_complete
+    np.testing.assert_allclose(w.state.to_picks("right"), [[12.0, 6.0], [31.0, 21.0]], atol=0.05)
+    mouse("button_press_event", "right", 31.5, 21.5)  # drag point 1 by +5 px in x (inside its box)
+    for dx in (1.0, 3.0, 5.0):
+        mouse("motion_notify_event", "right", 31.5 + dx, 21.5)
+    mouse("button_release_event", "right", 36.5, 21.5)
+    np.testing.assert_allclose(w.state.get("right", 1)[1:3], (36.0, 21.0), atol=0.05)
+    u, v = screen("right", 20.0, 20.0)
+    KeyEvent("key_press_event", canvas, "u", u, v)._process()
+    np.testing.assert_allclose(w.state.get("right", 1)[1:3], (31.0, 21.0), atol=0.05)
+    KeyEvent("key_press_event", canvas, "s", u, v)._process()
+    assert (tmp_path / "picks.json").is_file() and "saved 4 picks" in w.message
