@@ -45,17 +45,18 @@ def sample():
 
 def test_dltdv_round_trip_and_independent_read(tmp_path, sample):
     rig, tracks, points = sample
-    paths = write_dltdv(tmp_path, tracks=tracks, points3d=points, image_heights=(512, 512), prefix="t1-")
+    paths = write_dltdv(tmp_path, tracks=tracks, points3d=points, prefix="t1-")
     assert sorted(paths) == ["offsets", "xypts", "xyzpts", "xyzres"]
     xy = pd.read_csv(tmp_path / "t1-xypts.csv")
     assert list(xy.columns[:4]) == ["pt1_cam1_X", "pt1_cam1_Y", "pt1_cam2_X", "pt1_cam2_Y"]
     row = tracks[(tracks.camera == "right") & (tracks.frame == 3) & (tracks.point == 2)].iloc[0]
-    assert xy.loc[3, "pt3_cam2_X"] == pytest.approx(row.x + 1) and xy.loc[3, "pt3_cam2_Y"] == pytest.approx(512 - row.y)
+    # DLTdv8: MATLAB pixels, 1-based, y down
+    assert xy.loc[3, "pt3_cam2_X"] == pytest.approx(row.x + 1) and xy.loc[3, "pt3_cam2_Y"] == pytest.approx(row.y + 1)
     lost = tracks.loc[5]
     assert np.isnan(xy.loc[lost.frame, f"pt{lost.point + 1}_cam1_X"])
     assert pd.read_csv(tmp_path / "t1-offsets.csv").columns.tolist() == ["cam1_offset", "cam2_offset"]
     back, pts = read_dltdv(tmp_path / "t1-xypts.csv", xyzpts=tmp_path / "t1-xyzpts.csv",
-                           xyzres=tmp_path / "t1-xyzres.csv", image_heights=(512, 512))
+                           xyzres=tmp_path / "t1-xyzres.csv")
     good = tracks[tracks.status == "ok"].set_index(["camera", "frame", "point"]).sort_index()
     got = back.set_index(["camera", "frame", "point"]).loc[good.index]
     np.testing.assert_allclose(got[["x", "y"]].to_numpy(), good[["x", "y"]].to_numpy(), atol=1e-9)
@@ -66,10 +67,19 @@ def test_dltdv_round_trip_and_independent_read(tmp_path, sample):
                                merged[["X", "Y", "Z", "reproj_err"]].to_numpy(), atol=1e-9)
 
 
-def test_dltdv_needs_image_heights(tmp_path, sample):
+def test_argus_y_up_needs_image_heights_and_round_trips(tmp_path, sample):
     _, tracks, _ = sample
     with pytest.raises(ValueError, match="image_heights must give the left image's height"):
-        write_dltdv(tmp_path, tracks=tracks)
+        write_dltdv(tmp_path, tracks=tracks, y_axis="up")
+    write_dltdv(tmp_path, tracks=tracks, y_axis="up", image_heights=(512, 512))
+    xy = pd.read_csv(tmp_path / "xypts.csv")
+    row = tracks[(tracks.camera == "left") & (tracks.frame == 2) & (tracks.point == 4)].iloc[0]
+    assert xy.loc[2, "pt5_cam1_Y"] == pytest.approx(512 - row.y)  # origin bottom-left, 1-based
+    back, _ = read_dltdv(tmp_path / "xypts.csv", y_axis="up", image_heights=(512, 512))
+    got = back[(back.camera == "left") & (back.frame == 2) & (back.point == 4)].iloc[0]
+    assert got.x == pytest.approx(row.x) and got.y == pytest.approx(row.y)
+    with pytest.raises(ValueError, match="y_axis must be 'down'"):
+        write_dltdv(tmp_path, tracks=tracks, y_axis="sideways")
 
 
 def test_dlt_coefficients_fit_rig_and_report_distortion_cost(tmp_path, sample):
@@ -86,7 +96,7 @@ def test_dlt_coefficients_fit_rig_and_report_distortion_cost(tmp_path, sample):
     for c, cam in enumerate(("left", "right")):
         tr = tracks[(tracks.camera == cam) & (tracks.status == "ok")].merge(points, on=["frame", "point"])
         u = dlt_project(coefs[:, c], tr[["X", "Y", "Z"]].to_numpy() - fit.origin)
-        err = np.hypot(u[:, 0] - (tr.x + 1), u[:, 1] - (512 - tr.y))
+        err = np.hypot(u[:, 0] - (tr.x + 1), u[:, 1] - (tr.y + 1))
         assert err.max() < fit.max_px[c] + 0.05, (cam, err.max(), fit.max_px[c])
     assert np.all(fit.rms_px > 0.01)  # the rig has real distortion: the DLT cannot be exact
     # with distortion removed, the DLT is exact
@@ -141,7 +151,7 @@ def test_cli_export(tmp_path, sample):
     write_tracks_csv(tracks, tmp_path / "tracks.csv")
     write_points_csv(points, tmp_path / "points.csv")
     assert main(["export", "--tracks", str(tmp_path / "tracks.csv"), "--points", str(tmp_path / "points.csv"),
-                 "--format", "dltdv", "--image-height", "512", "--out", str(tmp_path / "dlt")]) == 0
+                 "--format", "dltdv", "--out", str(tmp_path / "dlt")]) == 0
     assert (tmp_path / "dlt" / "xypts.csv").is_file() and (tmp_path / "dlt" / "xyzpts.csv").is_file()
     assert main(["export", "--points", str(tmp_path / "points.csv"), "--format", "parquet",
                  "--out", str(tmp_path / "pq")]) == 0

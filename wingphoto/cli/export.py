@@ -5,8 +5,8 @@ from pathlib import Path
 
 #: format -> (inputs it can use, at least one of which is needed, description)
 FORMATS = {
-    "dltdv": (("tracks", "points"), "DLTdv8 xypts/offsets.csv (from --tracks, needs --image-height or --calib) "
-              "and xyzpts/xyzres.csv (from --points)"),
+    "dltdv": (("tracks", "points"), "DLTdv8 xypts/offsets.csv (from --tracks; --y-up for Argus / DLTdv 1-7, "
+              "which then needs --image-height or --calib) and xyzpts/xyzres.csv (from --points)"),
     "dlt-coefs": (("calib",), "_dltCoefs.csv: 11 DLT coefficients per camera fitted to --calib "
                   "(fitted where --points lie, when given); prints the residual lens distortion costs"),
     "thesis-mat": (("tracks", "points"), "xl.mat/xr.mat/cntrdl.mat/cntrdr.mat (from --tracks) and 3dall.mat "
@@ -31,8 +31,11 @@ def add_parser(sub):
     e.add_argument("--tracks", default=None, help="tracks CSV with both cameras (or give --tracks twice: left, right)",
                    action="append")
     e.add_argument("--calib", default=None, help="Calib_Results_stereo.mat")
+    e.add_argument("--y-up", action="store_true",
+                   help="pixels with the origin at the bottom-left, y up (Argus, DLTdv 1-7); default: DLTdv8's "
+                   "MATLAB pixels (origin top-left, 1-based)")
     e.add_argument("--image-height", type=int, default=None,
-                   help="image height in px for DLTdv's y-up pixels (default: from --calib)")
+                   help="image height in px for --y-up (default: from --calib)")
     e.add_argument("--prefix", default="", help="file name prefix for DLTdv files, e.g. trial01-")
     return e
 
@@ -65,12 +68,14 @@ def run(args):
             heights = (args.image_height, args.image_height)
         elif rig is not None and rig.left.image_size and rig.right.image_size:
             heights = (rig.left.image_size[1], rig.right.image_size[1])
-        if tracks is not None and heights is None:
-            raise ValueError("--format dltdv with --tracks needs --image-height (or --calib with the image size)")
+        y_axis = "up" if args.y_up else "down"
+        if tracks is not None and heights is None and y_axis == "up":
+            raise ValueError("--y-up with --tracks needs --image-height (or --calib with the image size)")
         written += exchange.write_dltdv(out, tracks=tracks, points3d=points, image_heights=heights,
-                                        prefix=args.prefix).values()
+                                        prefix=args.prefix, y_axis=y_axis).values()
     elif args.format == "dlt-coefs":
-        fit = exchange.fit_dlt(rig, points=None if points is None else points[["X", "Y", "Z"]].to_numpy())
+        fit = exchange.fit_dlt(rig, points=None if points is None else points[["X", "Y", "Z"]].to_numpy(),
+                               y_axis="up" if args.y_up else "down")
         written.append(exchange.write_dlt_coefficients(fit, out / f"{args.prefix}dltCoefs.csv"))
         print(fit.summary())
         print(f"DLT world origin = left camera frame shifted by {fit.origin.tolist()} mm "

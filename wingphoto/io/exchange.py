@@ -8,9 +8,10 @@ Coordinate conventions (also in ``docs/formats.md``)
 ----------------------------------------------------
 wingphoto pixels: ``(x, y)``, x right, y down, ``(0, 0)`` the centre of the top-left pixel.
 
-- **DLTdv8 / Argus** (``xypts.csv``, ``_dltCoefs.csv``): 1-based and **y up**, origin at
-  the bottom-left: ``x_dlt = x + 1``, ``y_dlt = H - y`` for an image ``H`` pixels high
-  (DLTdv displays images flipped up-down so that y increases upwards). Points are numbered
+- **DLTdv8** (``xypts.csv``, ``_dltCoefs.csv``): MATLAB pixels, 1-based, y down, origin at
+  the top-left (``y_axis="down"``, the default): ``x_dlt = x + 1``, ``y_dlt = y + 1``.
+  **Argus and DLTdv 1-7** put the origin at the bottom-left, y up (``y_axis="up"``):
+  ``x_dlt = x + 1``, ``y_dlt = H - y`` for an image ``H`` pixels high. Points are numbered
   from 1 (``pt1`` is wingphoto point 0), cameras from 1 (``cam1`` left, ``cam2`` right),
   rows are frames 0, 1, 2, ... (DLTdv's frame 1 is row 1). Missing values are NaN.
 - **The thesis' MATLAB files**: MATLAB pixels, 1-based and y down: ``x_mat = x + 1``,
@@ -47,11 +48,15 @@ __all__ = [
 CAMERAS = ("left", "right")
 
 
-def _image_height(height, camera):
+def _image_height(height, camera, y_axis="up"):
+    if y_axis == "down":
+        return None
+    if y_axis != "up":
+        raise ValueError(f"y_axis must be 'down' (DLTdv8) or 'up' (Argus, DLTdv 1-7), got {y_axis!r}")
     if height is None:
         raise ValueError(
-            f"image_heights must give the {camera} image's height in pixels: DLTdv's y axis points up "
-            f"(y_dlt = H - y), so pixel rows cannot be converted without it"
+            f"image_heights must give the {camera} image's height in pixels: with y_axis='up' (Argus, "
+            f"DLTdv 1-7) y_dlt = H - y, so pixel rows cannot be converted without it"
         )
     h = float(height)
     if not h > 0:
@@ -78,8 +83,8 @@ class DLTFit:
     Attributes
     ----------
     coefficients : (11, 2) ndarray
-        Column c is camera c+1's ``L1..L11`` (DLTdv/Argus convention: 1-based, y-up
-        pixels as in the module docstring). World frame: the left camera frame shifted by
+        Column c is camera c+1's ``L1..L11``, in the pixel convention of ``y_axis`` (see
+        the module docstring). World frame: the left camera frame shifted by
         ``origin`` (``X_world = X_left - origin``, mm).
     origin : (3,) ndarray
         Where the DLT world origin lies in the left camera frame, mm. The DLT cannot put
@@ -98,6 +103,7 @@ class DLTFit:
     rms_px: np.ndarray
     max_px: np.ndarray
     n_points: int
+    y_axis: str = "down"
 
     def summary(self):
         """One line per camera with the distortion residual."""
@@ -108,11 +114,14 @@ class DLTFit:
 
 
 def _to_dlt_pixels(x, height):
-    return np.column_stack([x[:, 0] + 1.0, height - x[:, 1]])
+    """wingphoto pixels -> DLT pixels: y down (height None) or y up (H - y); 1-based."""
+    y = x[:, 1] + 1.0 if height is None else height - x[:, 1]
+    return np.column_stack([x[:, 0] + 1.0, y])
 
 
 def _from_dlt_pixels(u, height):
-    return np.column_stack([u[:, 0] - 1.0, height - u[:, 1]])
+    y = u[:, 1] - 1.0 if height is None else height - u[:, 1]
+    return np.column_stack([u[:, 0] - 1.0, y])
 
 
 def _solve_dlt(X, u):
@@ -142,7 +151,7 @@ def dlt_project(coefficients, X):
     return np.column_stack([(X @ L[0:3] + L[3]) / den, (X @ L[4:7] + L[7]) / den])
 
 
-def fit_dlt(rig, *, points=None, origin=None, depth_range=0.2, n_grid=21):
+def fit_dlt(rig, *, points=None, origin=None, depth_range=0.2, n_grid=21, y_axis="down"):
     """Fit DLTdv/Argus 11-parameter DLT coefficients to a calibrated rig.
 
     Parameters
@@ -161,11 +170,15 @@ def fit_dlt(rig, *, points=None, origin=None, depth_range=0.2, n_grid=21):
         Relative depth span of the default volume (default 0.2).
     n_grid : int
         Rays per image side of the default volume (default 21).
+    y_axis : {"down", "up"}
+        "down" (default): DLTdv8's MATLAB pixels; "up": Argus / DLTdv 1-7 (origin at the
+        bottom-left).
 
     Returns
     -------
     DLTFit
     """
+    _image_height(1, "left", y_axis)  # validates y_axis
     sizes = [rig.left.image_size, rig.right.image_size]
     if any(s is None for s in sizes):
         raise ValueError(
@@ -201,14 +214,14 @@ def fit_dlt(rig, *, points=None, origin=None, depth_range=0.2, n_grid=21):
         inside = np.all(np.isfinite(x), axis=1) & (x[:, 0] > -0.5) & (x[:, 0] < w - 0.5) & (x[:, 1] > -0.5) & (x[:, 1] < h - 0.5)
         if inside.sum() < 6:
             raise ValueError(f"fewer than 6 of the fitting points fall inside the {CAMERAS[i]} image; pass points=")
-        u = _to_dlt_pixels(x[inside], h)
+        u = _to_dlt_pixels(x[inside], h if y_axis == "up" else None)
         Xw = pts[inside] - origin
         coefs[:, i] = _solve_dlt(Xw, u)
         err = np.linalg.norm(dlt_project(coefs[:, i], Xw) - u, axis=1)
         rms[i] = float(np.sqrt(np.mean(err**2)))
         mx[i] = float(err.max())
         n_used = min(n_used, int(inside.sum()))
-    return DLTFit(coefs, origin, rms, mx, n_used)
+    return DLTFit(coefs, origin, rms, mx, n_used, y_axis)
 
 
 def write_dlt_coefficients(fit, path):
@@ -251,7 +264,7 @@ def _frames_points(tracks, points3d):
 
 
 def write_dltdv(out, *, tracks=None, points3d=None, image_heights=None, prefix="", origin=None,
-                statuses=("ok", "manual", "interpolated")):
+                statuses=("ok", "manual", "interpolated"), y_axis="down"):
     """Write DLTdv8 files: ``{prefix}xypts.csv``, ``xyzpts.csv``, ``xyzres.csv``, ``offsets.csv``.
 
     Parameters
@@ -263,8 +276,8 @@ def write_dltdv(out, *, tracks=None, points3d=None, image_heights=None, prefix="
         observations whose status is not in ``statuses`` are written as NaN.
     points3d : DataFrame, optional
         frame, point, X, Y, Z (mm, left camera frame), reproj_err (px) -> xyzpts/xyzres.
-    image_heights : dict or (2,) sequence
-        Image height of each camera in px (DLTdv's y axis points up). Required with tracks.
+    image_heights : dict or (2,) sequence, optional
+        Image height of each camera in px; needed with ``y_axis="up"`` only.
     prefix : str
         File name prefix, e.g. ``"trial01-"`` (DLTdv8 writes ``trial01-xypts.csv``).
     origin : (3,) array_like, optional
@@ -272,6 +285,9 @@ def write_dltdv(out, *, tracks=None, points3d=None, image_heights=None, prefix="
         :class:`DLTFit` (pass ``fit.origin``); default: the left camera frame.
     statuses : tuple of str
         Track statuses exported as positions.
+    y_axis : {"down", "up"}
+        "down" (default): DLTdv8 (MATLAB pixels, origin top-left); "up": Argus and
+        DLTdv 1-7 (origin bottom-left, ``y_dlt = H - y``).
 
     Returns
     -------
@@ -293,7 +309,7 @@ def write_dltdv(out, *, tracks=None, points3d=None, image_heights=None, prefix="
             sel = (cams == cam).to_numpy() & use
             if not sel.any():
                 continue
-            h = _image_height(heights[c], cam)
+            h = _image_height(heights[c], cam, y_axis)
             f = tracks["frame"].to_numpy(np.int64)[sel]
             p = tracks["point"].to_numpy(np.int64)[sel]
             u = _to_dlt_pixels(tracks[["x", "y"]].to_numpy(float)[sel], h)
@@ -332,7 +348,7 @@ _XY_COL = re.compile(r"^pt(\d+)_cam(\d+)_([XY])$")
 _XYZ_COL = re.compile(r"^pt(\d+)_([XYZ])$")
 
 
-def read_dltdv(xypts=None, *, xyzpts=None, xyzres=None, image_heights=None, origin=None):
+def read_dltdv(xypts=None, *, xyzpts=None, xyzres=None, image_heights=None, origin=None, y_axis="down"):
     """Read DLTdv8 files back into wingphoto tables.
 
     Parameters
@@ -340,10 +356,12 @@ def read_dltdv(xypts=None, *, xyzpts=None, xyzres=None, image_heights=None, orig
     xypts : str or Path, optional
         ``xypts.csv``; cam1 becomes ``left``, cam2 ``right`` (more cameras: ``cam3``...).
     xyzpts, xyzres : str or Path, optional
-    image_heights : dict or (2,) sequence
-        Needed with ``xypts`` (y_dlt = H - y).
+    image_heights : dict or (2,) sequence, optional
+        Needed with ``y_axis="up"`` (y_dlt = H - y).
     origin : (3,) array_like, optional
         Added back to the 3D points (see :func:`write_dltdv`).
+    y_axis : {"down", "up"}
+        As in :func:`write_dltdv`.
 
     Returns
     -------
@@ -367,7 +385,7 @@ def read_dltdv(xypts=None, *, xyzpts=None, xyzres=None, image_heights=None, orig
         cams = sorted({int(_XY_COL.match(c.strip()).group(2)) for c in df.columns})
         for c in cams:
             name = CAMERAS[c - 1] if c <= 2 else f"cam{c}"
-            h = _image_height(heights[c - 1] if c <= 2 else None, name)
+            h = _image_height(heights[c - 1] if c <= 2 else None, name, y_axis)
             for p in points_ids:
                 u = df[[f"pt{p}_cam{c}_X", f"pt{p}_cam{c}_Y"]].to_numpy(float)
                 x = _from_dlt_pixels(u, h)
