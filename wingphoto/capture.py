@@ -100,14 +100,25 @@ def motion_signal(frames, *, factor=4, progress=False):
     return d
 
 
-def _still(d, factor):
-    """Per-frame motion (the smaller of the changes to the previous and next frame) and stillness.
+def _still(d, factor, nums=None):
+    """Per-frame motion and stillness from the changes to the previous and next frame.
 
-    The smaller one: the first frame after a move differs from the blurred frame before
-    it but not from the next; a frame during a move differs from both.
+    With consecutive frames, the larger change: a frame is still only when it matches
+    both neighbours, which leaves out the first frame of a move (its start is eased, so
+    it barely differs from the frame before) as well as the first frame after one. With
+    a subsampled recording (``nums`` not consecutive), a neighbour far away in time says
+    little about the frame itself: the smaller change then.
     """
     nxt = np.append(d[1:], np.nan)
-    m = np.fmin(d, nxt)
+    m = np.fmax(d, nxt)
+    if nums is not None:
+        gap = np.diff(np.asarray(nums))
+        prev_adj = np.r_[False, gap == 1]
+        next_adj = np.r_[gap == 1, False]
+        sparse = ~prev_adj & ~next_adj
+        m = np.where(prev_adj & ~next_adj, d, m)
+        m = np.where(next_adj & ~prev_adj, nxt, m)
+        m = np.where(sparse, np.fmin(d, nxt), m)
     finite = m[np.isfinite(m)]
     floor = float(np.percentile(finite, 25)) if finite.size else 0.0
     thr = max(factor * floor, 1e-6)
@@ -134,7 +145,7 @@ def estimate_offset(motion_left, motion_right, *, max_offset=10):
     """
     a = np.log(np.asarray(motion_left, float) + 1e-3)
     b = np.log(np.asarray(motion_right, float) + 1e-3)
-    best, best_c, second = None, -np.inf, -np.inf
+    corr = {}
     for k in range(-int(max_offset), int(max_offset) + 1):
         i0, i1 = max(0, -k), min(len(a), len(b) - k)
         if i1 - i0 < 8:
@@ -143,14 +154,15 @@ def estimate_offset(motion_left, motion_right, *, max_offset=10):
         ok = np.isfinite(x) & np.isfinite(y)
         if ok.sum() < 8 or np.std(x[ok]) == 0 or np.std(y[ok]) == 0:
             continue
-        c = float(np.corrcoef(x[ok], y[ok])[0, 1])
-        if c > best_c:
-            best, best_c, second = k, c, best_c
-        elif c > second:
-            second = c
-    if best is None or best_c < 0.5 or best_c - second < 0.02:
-        return None, (best_c if best is not None else np.nan)
-    return int(best), best_c
+        corr[k] = float(np.corrcoef(x[ok], y[ok])[0, 1])
+    if not corr:
+        return None, np.nan
+    best = max(corr, key=corr.get)
+    # neighbouring lags correlate almost as well (motion is smooth); distant ones must not
+    far = [c for k, c in corr.items() if abs(k - best) >= 3]
+    if corr[best] < 0.5 or (far and corr[best] - max(far) < 0.05):
+        return None, corr[best]
+    return int(best), corr[best]
 
 
 # ============================================================== per-candidate checks
@@ -219,7 +231,7 @@ class Selection:
         The chosen frames (for the contact sheet).
     candidates : pandas.DataFrame
         One row per left frame: ``frame``, ``right_frame``, ``motion_left``,
-        ``motion_right`` (grey-level change, the smaller of those to the previous and
+        ``motion_right`` (grey-level change, the larger of those to the previous and
         next frame),
         ``still``, ``run`` (still period, -1 when moving), ``step`` (pan-tilt step when
         the schedule is known, else -1), ``found_left``, ``found_right``,
@@ -318,15 +330,18 @@ def select_calibration_frames(
     start_frame : int, optional
         Frame number at which the schedule started (the trigger), default 0.
     still_factor : float, optional
-        A frame is still when its change to a neighbour (the smaller of the two) is at
-        most this factor times the recording's noise floor (25th percentile of the
-        changes), in both views. Default 2.
+        A frame is still when its changes to both neighbours are at most this factor
+        times the recording's noise floor (25th percentile of the changes), in both
+        views (for a subsampled recording, see ``frame_numbers``, its change to the
+        nearer-looking neighbour). Default 2.
     sharpness_factor : float, optional
         Reject a candidate whose sharpness is below this fraction of the median over the
         detected candidates (default 0.5).
     per_run : int, optional
-        Frames examined per still period, latest first (default 3); the latest that is
-        detected and sharp is chosen (the board has settled longest after the move).
+        Frames examined per still period, latest first (default 3; in a period of more
+        than 6 frames the last 2 are skipped, where the next move may have begun
+        unseen); the latest that is detected and sharp is chosen (the board has settled
+        longest after the move).
     duplicate_px : float, optional
         A still period whose board lies within this mean corner distance of an already
         chosen one is a duplicate pose (default 2 px).
@@ -377,8 +392,8 @@ def select_calibration_frames(
         if est is not None and est != offset:
             logger.warning("offset=%d given, but the board motion says %+d (correlation %.2f): check the pairing",
                            offset, est, score)
-    ml, sl, thr_l = _still(dl, still_factor)
-    mr, sr, thr_r = _still(dr, still_factor)
+    ml, sl, thr_l = _still(dl, still_factor, nums)
+    mr, sr, thr_r = _still(dr, still_factor, nums)
     T = len(L)
     rows = []
     for i in range(T):
@@ -452,7 +467,10 @@ def select_calibration_frames(
             return x
     examined = {}
     for r, members in enumerate(tqdm(runs, desc="still periods", disable=not progress)):
-        order = members[::-1]  # latest first: the board has settled longest after the move
+        # latest first (the board has settled longest after the move), but not the last
+        # `guard` frames of a long period: a move's eased start hides below the noise there
+        guard = 2 if len(members) > 6 else 0
+        order = members[: len(members) - guard][::-1] + members[len(members) - guard:]
         for i in order[per_run:]:
             cand.at[i, "reason"] = "another frame of the same still period examined"
         for i in order[:per_run]:
