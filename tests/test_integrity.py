@@ -181,3 +181,14 @@ def test_track_folder_stops_on_a_duplicated_frame(frames):
     left[6] = left[5]
     with pytest.raises(ValueError, match=r"duplicated frame\(s\) at index 6.*force=True \(--force\)"):
         wp.track_folder(left, SAMPLES / "picks.json", camera="left", progress=False)
+
+
+def test_frame_lost_midway_in_one_view_is_found_with_a_rig(frames):
+    from wingphoto.synth.rig import load_rig
+
+    left, right = frames
+    rig = load_rig(SAMPLES.parent / "rig.json")
+    lost = np.concatenate([right[:14], right[15:29]])  # right frame 14 lost; both views 28 frames
+    rep = check_stereo_sequences(left[:28], lost, rig=rig)
+    assert not rep.ok and rep.offset is None
+    assert any("changes from +0 over the first 7 frames to +1 over the last 7" in p for p in rep.problems), rep.problems

@@ -506,6 +506,20 @@ def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_sc
             notes.append(f"the epipolar frame-offset check is inconclusive (best lag matches {score:.0%} of the "
                          f"blobs, the next {second:.0%})")
             offset = None
+        n = min(len(left), len(right))
+        if n >= 12:  # the same check on the first and last quarter: a frame lost in one view midway
+            q = max(6, n // 4)
+            start = _epipolar_offset(left[:q], right[:q], rig, int(max_offset), n_frames=10)
+            end = _epipolar_offset(left[len(left) - q:], right[len(right) - q:], rig, int(max_offset), n_frames=10)
+            end_offset = None if end[0] is None else end[0] + (len(left) - len(right))
+            good = [r[0] is not None and r[1] >= 0.5 and r[1] - r[2] >= 0.15 for r in (start, end)]
+            if all(good) and start[0] != end_offset:
+                problems.append(
+                    f"the frame offset changes from {start[0]:+d} over the first {q} frames to {end_offset:+d} "
+                    f"over the last {q} (right frame t shows left frame t + offset): a frame was dropped or "
+                    f"repeated in one view in between; cut both sequences at that point"
+                )
+                offset = None
     else:
         guess, score, second = _estimate_offset(lrep.motion_energy, rrep.motion_energy, int(max_offset))
         offset = None
