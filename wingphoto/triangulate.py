@@ -239,7 +239,9 @@ def _check_tracks_table(t, name):
         try:
             v = pd.to_numeric(t[col], errors="raise").to_numpy(np.float64)
         except (ValueError, TypeError) as exc:
-            raise ValueError(f"{name}: column {col!r} must hold pixel coordinates (numbers, NaN when missing): {exc}") from None
+            raise ValueError(
+                f"{name}: column {col!r} must hold pixel coordinates (numbers, NaN when missing): {exc}"
+            ) from None
         if np.any(np.isinf(v)):
             raise ValueError(f"{name}: column {col!r} holds infinite values; a missing position is NaN")
         t[col] = v
@@ -279,7 +281,9 @@ def _select_cameras(tl, tr):
                 f"{cams[0]}; pass the {want} camera's tracks as {name}"
             )
         if len(cams) > 1:
-            raise ValueError(f"{name} holds several cameras {cams} and none is named {want!r}; give one camera per table")
+            raise ValueError(
+                f"{name} holds several cameras {cams} and none is named {want!r}; give one camera per table"
+            )
         return t
 
     cl, cr = cameras(tl), cameras(tr)

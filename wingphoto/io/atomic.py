@@ -125,7 +125,9 @@ def check_output_path(path):
     if stat.S_ISREG(st.st_mode):
         return path
     if stat.S_ISDIR(st.st_mode):
-        raise IsADirectoryError(f"output {text} is a folder, not a file; give the name of a file (inside it or elsewhere)")
+        raise IsADirectoryError(
+            f"output {text} is a folder, not a file; give the name of a file (inside it or elsewhere)"
+        )
     raise OutputError(
         errno.EINVAL,
         f"output {text} is {_kind(st.st_mode)}, not a regular file; wingphoto writes results only to regular "
