@@ -36,7 +36,8 @@ def test_readme_your_own_data_uses_existing_commands():
     from wingphoto.cli import COMMANDS
 
     text = (REPO / "README.md").read_text(encoding="utf-8")
-    section = text[text.index("## Your own data"):text.index("## The library")]
+    start = text.index("## Your own data")
+    section = text[start:text.index("\n## ", start)]
     used = set(re.findall(r"^wingphoto (\w+)", section, re.M))
     assert used == {"calibrate", "check", "pick", "track", "triangulate", "analyse"}
     assert used <= set(COMMANDS)

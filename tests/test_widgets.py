@@ -236,6 +236,7 @@ def test_picker_drag_moves_then_resizes_one_undo_each():
     before = p.state
     p.on_drag(21.0, 19.0, 25.0, 22.0)  # grab inside the rectangle: move by the drag
     assert p.state.get("left", 0)[:3] == (0, 24.0, 23.0)
+    assert p.message == "point 0 moved to (24.0, 23.0)"
     assert p.state.undo() == before
     p.on_drag(29.0, 23.0, 31.0, 26.0)  # grab the right edge (x = 24 + 5): widen only
     assert p.state.get("left", 0)[3:5] == (7.0, 5.0)

@@ -231,9 +231,14 @@ class ImageView:
         if not p["dragging"]:
             self.on_click(u, v)
         elif p["preview"] is not None:
+            self.message = self._drag_message(p)
             self._commit(p["preview"])
         else:
             self.render()
+
+    def _drag_message(self, press):
+        """Status after a committed drag (subclasses say what changed)."""
+        return ""
 
     def on_drag(self, u0, v0, u1, v1):
         """Press at display (u0, v0), drag to (u1, v1) and release (a whole drag at once)."""
@@ -605,6 +610,13 @@ class Picker(ImageView):
         half_w = max(pick.half_w + (abs(x - pick.x) - abs(x0 - pick.x)), 1.0) if x_edge else pick.half_w
         half_h = max(pick.half_h + (abs(y - pick.y) - abs(y0 - pick.y)), 1.0) if y_edge else pick.half_h
         return self.state.resize(self._camera, pick.point, half_w, half_h).select(pick.point)
+
+    def _drag_message(self, press):
+        kind, pick = press["target"][:2]
+        new = press["preview"].get(self._camera, pick.point)
+        if kind == "move":
+            return f"point {pick.point} moved to ({new.x:.1f}, {new.y:.1f})"
+        return f"point {pick.point} box resized to ±{new.half_w:.1f} x ±{new.half_h:.1f} px"
 
     # ---------------------------------------------------------------- controls as methods
     def set_camera(self, camera):
