@@ -158,9 +158,8 @@ def estimate_offset(motion_left, motion_right, *, max_offset=10):
     if not corr:
         return None, np.nan
     best = max(corr, key=corr.get)
-    # neighbouring lags correlate almost as well (motion is smooth); distant ones must not
-    far = [c for k, c in corr.items() if abs(k - best) >= 3]
-    if corr[best] < 0.5 or (far and corr[best] - max(far) < 0.05):
+    # nearby lags correlate almost as well (a move lasts many frames): only the peak's height counts
+    if corr[best] < 0.5:
         return None, corr[best]
     return int(best), corr[best]
 
