@@ -218,6 +218,8 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
     >>> s[["n", "mean", "min", "max", "range"]].round(3).values.tolist()
     [[3.0, 53.2, 53.0, 53.4, 0.4]]
     """
+    if isinstance(ddof, bool) or not isinstance(ddof, (int, np.integer)) or ddof < 0:
+        raise ValueError(f"ddof must be a whole number >= 0 (1: the sample standard deviation), got {ddof!r}")
     pairs = _pairs(pairs)
     rows = []
     for cond, pts in _split_conditions(points, condition):
