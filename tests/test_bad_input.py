@@ -821,3 +821,9 @@ def test_random_bytes_as_picks(tmp_path_factory, data, suffix):
         assert str(p) in str(exc) and "\n" not in str(exc), str(exc)
     else:  # only a well-formed table may come back
         assert {"point", "x", "y"} <= set(table.columns) and np.isfinite(table[["x", "y"]].to_numpy()).all()
+
+
+@pytest.mark.parametrize("ddof", [-1, 0.5, True])
+def test_length_statistics_ddof_checked(ddof):
+    with pytest.raises(ValueError, match="ddof must be a whole number >= 0"):
+        wp.length_statistics(np.zeros((5, 2, 3)), [(0, 1)], ddof=ddof)
