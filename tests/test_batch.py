@@ -41,11 +41,15 @@ name = "test batch"
 group_by = ["condition"]
 
 [defaults]
-calibration = {{left = "{CALIB}/left/calib_*[13579].tif", right = "{CALIB}/right/calib_*[13579].tif",
-               pattern_size = [9, 6], square_size = 8.0}}
 left = "{SAMPLES}/flapping/left"
 right = "{SAMPLES}/flapping/right"
 picks = "{SAMPLES}/flapping/picks.json"
+
+[defaults.calibration]
+left = "{CALIB}/left/calib_*[13579].tif"
+right = "{CALIB}/right/calib_*[13579].tif"
+pattern_size = [9, 6]
+square_size = 8.0
 
 [defaults.analysis]
 length_pairs = {[list(p) for p in PAIRS]}
