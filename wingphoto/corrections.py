@@ -1,4 +1,13 @@
-"""Manual corrections: one log format (CSV or JSON), shared by the review widget."""
+"""Manual corrections: one log format (CSV or JSON), shared by the review widget.
+
+A corrections log is a list of (point, frame, x, y) - optionally with the ``camera`` -
+in the order the corrections were made: replaying it (:func:`apply_corrections`) gives
+the corrected tracks, a later correction of the same point-frame winning. NaN x, y
+declares the point lost on that frame. :func:`save_corrections` writes it as CSV
+(``camera,point,frame,x,y``) or JSON (``{"format": "wingphoto-corrections", "version": 1,
+"corrections": [...]}``); :func:`load_corrections` reads both. The review widget
+(:mod:`wingphoto.widgets.state`) logs, saves, loads and replays with these functions.
+"""
 from __future__ import annotations
 
 import json
@@ -6,12 +15,27 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["CORRECTION_COLUMNS", "apply_corrections", "load_corrections", "save_corrections"]
 
-# --------------------------------------------------------------------------- corrections
 CORRECTION_COLUMNS = ["point", "frame", "x", "y"]
 
 
-def _as_corrections(corrections):
+def _whole(values, name, source):
+    """int64 array of whole numbers >= 0 or ValueError naming the first bad row."""
+    import pandas as pd
+
+    v = pd.to_numeric(pd.Series(values), errors="coerce").to_numpy(np.float64)
+    bad = ~np.isfinite(v) | (v != np.round(v)) | (v < 0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raw = pd.Series(values).iloc[k]
+        raw = raw.item() if isinstance(raw, np.generic) else raw
+        raise ValueError(f"{source}: correction {k} has {name} {raw!r}; a correction's {name} must be a whole "
+                         "number >= 0 (fix or delete that row)")
+    return v.astype(np.int64)
+
+
+def _as_corrections(corrections, source="corrections"):
     import pandas as pd
 
     if isinstance(corrections, pd.DataFrame):
@@ -27,11 +51,22 @@ def _as_corrections(corrections):
         c = pd.DataFrame(rows, columns=None if rows else CORRECTION_COLUMNS)
     missing = [k for k in CORRECTION_COLUMNS if k not in c.columns]
     if missing:
-        raise ValueError(f"corrections lack columns {missing}; each correction is (point, frame, x, y)")
-    c["point"] = c["point"].astype(np.int64)
-    c["frame"] = c["frame"].astype(np.int64)
-    c["x"] = c["x"].astype(np.float64)
-    c["y"] = c["y"].astype(np.float64)
+        raise ValueError(f"{source} lack columns {missing}; each correction is (point, frame, x, y)")
+    c["point"] = _whole(c["point"], "point", source)
+    c["frame"] = _whole(c["frame"], "frame", source)
+    for k in ("x", "y"):
+        v = pd.to_numeric(c[k], errors="coerce")
+        bad = v.isna() & c[k].notna() & ~c[k].astype(str).str.lower().isin(["nan", "none", ""])
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise ValueError(f"{source}: correction {i} has {k} {c[k].iloc[i]!r}, not a number (px; NaN x and y "
+                             "declare the point lost)")
+        c[k] = v.astype(np.float64)
+    half = np.isfinite(c["x"].to_numpy()) != np.isfinite(c["y"].to_numpy())
+    if half.any():
+        i = int(np.flatnonzero(half)[0])
+        raise ValueError(f"{source}: correction {i} has only one of x, y; give both (or both NaN to declare the "
+                         "point lost)")
     if "camera" in c.columns:
         c["camera"] = c["camera"].astype(str)
     return c.reset_index(drop=True)
@@ -104,12 +139,19 @@ def load_corrections(path):
         raise ValueError(f"corrections path must end in .csv or .json, got {path.name!r}")
     if not path.is_file():
         raise FileNotFoundError(f"corrections file {path} not found: it does not exist (check the path)")
+    if path.stat().st_size == 0:
+        raise ValueError(f"corrections file {path} is empty (0 bytes); save the corrections again or pass "
+                         "another file")
     if suffix == ".csv":
-        c = pd.read_csv(path, dtype={"camera": str})
+        try:
+            c = pd.read_csv(path, dtype={"camera": str}, encoding="utf-8")
+        except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
+            raise ValueError(f"corrections file {path} is not a readable CSV corrections log "
+                             f"(point,frame,x,y[,camera]): {type(exc).__name__}: {exc}") from None
     else:
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise ValueError(f"corrections file {path} is not valid JSON: {exc}") from None
         if not (isinstance(data, dict) and data.get("format") == "wingphoto-corrections"
                 and isinstance(data.get("corrections"), list)):
@@ -122,7 +164,7 @@ def load_corrections(path):
     missing = [k for k in CORRECTION_COLUMNS if k not in c.columns]
     if missing:
         raise ValueError(f"corrections file {path} lacks columns {missing}; each correction is (point, frame, x, y)")
-    return _as_corrections(c)
+    return _as_corrections(c, f"corrections file {path}")
 
 
 def apply_corrections(tracks, corrections):
@@ -176,6 +218,10 @@ def apply_corrections(tracks, corrections):
     out = tracks.copy()
     if len(c) == 0:
         return out
+    for col in ("reason", "status"):
+        # (read back from a CSV, an all-empty text column is float NaN)
+        if col in out.columns and not (pd.api.types.is_object_dtype(out[col]) or pd.api.types.is_string_dtype(out[col])):
+            out[col] = out[col].astype(object).where(out[col].notna(), "")
     by_cam = "camera" in out.columns and "camera" in c.columns
     key = ["camera", "frame", "point"] if by_cam else ["frame", "point"]
     c = c.drop_duplicates(subset=key, keep="last").reset_index(drop=True)

@@ -31,6 +31,7 @@ from ..video import write_tracking_video
 from .driver import retrack_from, track_markers
 from .engine import try_numba
 from .match import match_windows
+from .options import TrackOptions
 from .refine import refine_centroids
 from .results import TRACKER_COLUMNS
 from .status import REASONS, STATUS
@@ -47,6 +48,7 @@ __all__ = [
     "retrack_from",
     "write_tracking_video",
     "try_numba",
+    "TrackOptions",
     "TRACKER_COLUMNS",
     "REASONS",
     "STATUS",

@@ -1,6 +1,7 @@
 """track_markers and retrack_from: passes over a sequence, checkpoints, backward merge."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -8,7 +9,7 @@ import numpy as np
 
 from .checkpoint import _Checkpointer, _fingerprint, _load_checkpoint, _run_pass
 from .inputs import _Frames, _parse_picks
-from .options import _PARAM_DEFAULTS, _Params
+from .options import TrackOptions
 from .results import _Results, _merge_backward, _tracks_frame
 from .status import _R, FLAGGED, OK
 from .tracker import Tracker as _Tracker
@@ -16,14 +17,27 @@ from .tracker import Tracker as _Tracker
 logger = logging.getLogger("wingphoto.track")
 
 
-def track_markers(frames, picks, *, camera="left", search_radius=None, min_score=0.6,
-                  lost_score=0.3, ambiguity_margin=0.1, update_score=0.88, refresh_below=0.93,
-                  update_rate=0.5, original_weight=0.3, update_every=4, max_coast=6,
-                  reacquire_radius=6, reacquire_score=0.8, min_mass_ratio=0.25,
-                  max_mass_ratio=None, jump_px=3.0, max_score_drop=None, polarity="auto",
-                  search_every=4, bidirectional=False, fb_tolerance=0.5, checkpoint=None,
-                  checkpoint_every=500, progress=True):
-    """Track markers from their frame-0 picks through a sequence, flagging doubtful points.
+def _resolve_options(options, **given):
+    """One :class:`TrackOptions` from ``options`` and keyword options (None: not given)."""
+    if options is None:
+        options = TrackOptions()
+    elif isinstance(options, dict):
+        options = TrackOptions(**options)
+    elif not isinstance(options, TrackOptions):
+        raise ValueError(f"options must be a wingphoto.track.TrackOptions (or a dict of its fields), "
+                         f"got {type(options).__name__}")
+    names = TrackOptions.names()
+    unknown = sorted(k for k in given if k not in names)
+    if unknown:
+        raise TypeError(f"unknown option(s) {unknown}; the options are {list(names)}")
+    changes = {k: v for k, v in given.items() if v is not None or k in ("max_mass_ratio", "max_score_drop")}
+    return dataclasses.replace(options, **changes) if changes else options
+
+
+def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma=None, polarity=None,
+                  bidirectional=False, checkpoint=None, checkpoint_every=500, progress=True, options=None,
+                  **expert):
+    """Track markers from their picks through a sequence, flagging doubtful points.
 
     Parameters
     ----------
@@ -32,59 +46,30 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         :func:`wingphoto.io.read_sequence` returns (``len`` and ``[i]``); read one at a
         time, so memory does not grow with the sequence length.
     picks : (N, 2) array_like, or DataFrame / list of dicts
-        Each marker's position in frame 0: (x, y) clicks in px (origin at the centre of the
+        Each marker's position: (x, y) clicks in frame 0 in px (origin at the centre of the
         top-left pixel; rounding to the pixel is fine), the template size then chosen from
         the blob; or the picker's saved picks with columns ``point, x, y`` and optionally
-        ``half_size`` (template half width, px) or ``rect`` (``(x0, y0, width, height)``).
-        A NaN pick (a marker not visible in frame 0) gives that point ``lost`` rows with
-        reason ``no_pick`` (and a logged warning).
+        ``frame`` (the frame the marker was picked in, default 0: a marker picked in frame
+        k is tracked forward and backward from k), ``half_w``/``half_h``, ``half_size``
+        (template half width, px) or ``rect`` (``(x0, y0, width, height)``). A NaN pick (a
+        marker not visible) gives that point ``lost`` rows with reason ``no_pick`` (and a
+        logged warning).
     camera : str
         Value of the ``camera`` column.
     search_radius : int, optional
         Largest search radius in px (default 20): used on frame 1, where no velocity is
         known yet, and as the cap of the prediction-driven radius. Must exceed the largest
         motion between frames 0 and 1.
-    min_score, lost_score : float
-        Correlation (TM_CCOEFF_NORMED) below ``min_score`` is flagged ``low_score``, below
-        ``lost_score`` lost.
-    ambiguity_margin : float
-        Flag ``ambiguous`` when a second, unexplained correlation peak comes within this
-        margin of the best.
-    update_score, refresh_below, update_rate, original_weight : float
-        Template update: when ``update_score <= score < refresh_below`` the template cut at
-        the refined centre is blended into the running template with weight
-        ``update_rate``; the matched template is ``original_weight * original +
-        (1 - original_weight) * running``.
-    max_coast : int
-        Frames a marker may go without a reliable position before it is declared lost
-        (``lost_track``) and searched for from its neighbours.
-    reacquire_radius, reacquire_score : int, float
-        Search radius and minimum score to re-acquire a lost marker.
-    min_mass_ratio : float
-        Flag ``no_signal`` when the blob's integrated brightness drops below this fraction
-        of its frame-0 value.
-    max_mass_ratio : float, optional
-        Flag ``merged`` when the integrated brightness exceeds this multiple of its running
-        value (a blob that grew by merging with something). Off by default.
-    jump_px : float
-        Smallest distance (px) between refined and predicted position flagged ``jump``; the
-        limit is ``max(jump_px, 4 sigma + 2 (frames coasted))``.
-    max_score_drop : float, optional
-        Flag ``appearance`` when the correlation falls by more than this below its running
-        value in one frame: catches an *untracked* look-alike (a glare spot, an unpicked
-        marker) merging with a marker. Off by default: on wing sequences the glare sweeps
-        make it flag good points, which then coast.
-    update_every : int
-        At most one template update per marker every this many frames.
-    search_every : int
-        A marker on the fast path (moving predictably, alone, matched with score >= 0.9)
-        gets the full windowed NCC search only every ``search_every`` frames (staggered
-        across markers); in between it is refined at its prediction and verified by the
-        NCC score there (>= 0.85), the residual to the prediction and its brightness; a
-        failed verification triggers the full search on the same frame. 1 searches every
-        marker on every frame (slower).
-    polarity : {"auto", 1, -1}
-        Bright (1) or dark (-1) markers; "auto" decides per marker from frame 0.
+    max_sigma : float, optional
+        Largest ``sigma`` (px) of an ``ok`` point (default 0.3).
+    polarity : {"auto", 1, -1}, optional
+        Bright (1) or dark (-1) markers; "auto" (default) decides per marker.
+    options : TrackOptions, optional
+        All options (:class:`~wingphoto.track.TrackOptions`: the user options above, and
+        the expert thresholds with their documentation); the keywords above override it.
+    **expert
+        Any other field of :class:`~wingphoto.track.TrackOptions` by name (``min_score``,
+        ``max_coast``, ``search_every`` ...).
     bidirectional : bool
         Also track backwards from the last frame; flag ``fb_disagree`` where the passes
         disagree by more than ``fb_tolerance`` px and use the backward position where only
@@ -112,9 +97,12 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         after a re-acquisition), ``fb_disagree``, ``no_pick``, ``pick_moved`` (frame 0:
         the refinement moved the click by more than 1.5 px, or saw a foreign blob or a
         rough background; the click is kept), ``foreign`` (something bright not
-        explained by a known marker touches the disk), ``background`` (the background
-        around the marker is not flat enough for its contrast); :func:`check_stereo` adds
-        ``stereo``.
+        explained by a known marker touches the disk), ``imprecise`` (``sigma`` above
+        ``max_sigma``), ``blank`` (a blank frame: black, saturated, constant),
+        ``constellation`` (most markers left their predictions at once and no glitch - a
+        dropped or repeated frame, a camera bump - explains it); :func:`check_stereo` adds
+        ``stereo``. ``sigma`` (px) is the per-axis 1-sigma uncertainty of x, y, estimated
+        from the image (``docs/tracker.md``), NaN where there is no position.
 
     Raises
     ------
@@ -138,14 +126,23 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     (24.0, 18.0, 'ok')
     """
     fr = _Frames(frames)
-    xy_all, ids_all, half_all = _parse_picks(picks)
+    xy_all, ids_all, half_all, pf_all = _parse_picks(picks)
     active = np.all(np.isfinite(xy_all), axis=1)
     if not active.all():
         logger.warning("picks of points %s are NaN: those points are reported lost (reason 'no_pick')",
                        ids_all[~active].tolist())
+    late = active & (pf_all >= fr.n)
+    if late.any():
+        k = int(np.flatnonzero(late)[0])
+        raise ValueError(f"point {ids_all[k]} was picked in frame {pf_all[k]} but the sequence has {fr.n} frames "
+                         "(0 to {}); pick it in a frame of this sequence".format(fr.n - 1))
     xy, ids, half = xy_all[active], ids_all[active], half_all[active]
-    options = dict(locals())
-    p = _Params(**{k: options[k] for k in _PARAM_DEFAULTS})
+    p = _resolve_options(options, search_radius=search_radius, max_sigma=max_sigma, polarity=polarity, **expert)
+    if (pf_all[active] != 0).any():
+        if checkpoint is not None:
+            raise ValueError("checkpoint= needs every marker picked in frame 0 (these picks were made in frames "
+                             f"{sorted(set(pf_all[active].tolist()))}); track without a checkpoint")
+        return _track_from_pick_frames(fr, xy_all, ids_all, half_all, pf_all, active, p, camera, progress)
     T, N = fr.n, len(xy)
     shape = fr.shape
     fw = _Results(T, N)
@@ -164,20 +161,13 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
     resumed = None
     if checkpoint is not None:
         fp = _fingerprint(fr, xy, ids, half, p, camera, bidirectional)
-        ck = _Checkpointer(checkpoint, fp, checkpoint_every, state)
+        ck = _Checkpointer(checkpoint, fp, checkpoint_every, state, fr)
         if Path(checkpoint).exists():
-            resumed = _load_checkpoint(checkpoint, fp)
+            resumed = _load_checkpoint(checkpoint, fp, fr, required=[p_ + k for p_ in ("fw_",)
+                                                                 for k in _Results.names + ("status", "reason")])
     if resumed is None:
         tracker = _Tracker.from_picks(fr[0], xy, half, p, fr.is_u8, ids)
-        fw.x[0], fw.y[0] = tracker.pos[:, 0], tracker.pos[:, 1]
-        fw.xpix[0], fw.ypix[0] = np.rint(tracker.pos[:, 0]), np.rint(tracker.pos[:, 1])
-        fw.score[0] = 1.0
-        fw.status[0] = OK
-        # a click is within ~0.7 px of a marker's centre: a refinement that moved further
-        # was pulled by something (an unpicked neighbour, glare); the click is kept
-        moved = tracker.pick_moved
-        fw.status[0, moved] = FLAGGED
-        fw.reason[0, moved] = _R["pick_moved"]
+        _seed_row(fw, 0, tracker)
         box.update(phase="forward", next=1, tracker=tracker)
     else:
         meta, arrays = resumed
@@ -185,7 +175,11 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         if bw is not None and "bw_x" in arrays:
             bw.load(arrays, "bw_")
         st = {k[3:]: v for k, v in arrays.items() if k.startswith("st_")}
-        tracker = _Tracker.from_state(st, p, fr.is_u8, shape)
+        try:
+            tracker = _Tracker.from_state(st, p, fr.is_u8, shape)
+        except (KeyError, ValueError, IndexError) as exc:
+            raise ValueError(f"checkpoint {checkpoint} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+                             "delete it or pass another checkpoint path") from None
         box.update(phase=meta["phase"], next=int(meta["next"]), tracker=tracker)
         logger.info("resuming %s pass at frame %d from %s", meta["phase"], meta["next"], checkpoint)
 
@@ -205,7 +199,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
             box.update(phase="backward", next=T - 2)
             bw.x[T - 1], bw.y[T - 1] = fw.x[T - 1], fw.y[T - 1]
             bw.status[T - 1], bw.reason[T - 1] = fw.status[T - 1], fw.reason[T - 1]
-            bw.score[T - 1] = fw.score[T - 1]
+            bw.score[T - 1], bw.sigma[T - 1] = fw.score[T - 1], fw.sigma[T - 1]
             bw.xpix[T - 1], bw.ypix[T - 1] = fw.xpix[T - 1], fw.ypix[T - 1]
     if box["phase"] == "backward":
         _run_pass(fr, box["tracker"], bw, range(box["next"], -1, -1), -1, ck, progress, f"back {camera}")
@@ -221,6 +215,49 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, min_score
         _merge_backward(fw2, bw, p.fb_tolerance)
         return _tracks_frame(_expand(fw2, active), ids_all, camera)
     return _tracks_frame(_expand(fw, active), ids_all, camera)
+
+
+def _seed_row(res, k, tracker):
+    """Row ``k`` of ``res``: the refined picks (score 1; a click the refinement moved by more
+    than 1.5 px, or that saw a foreign blob or a rough background, is kept and flagged
+    ``pick_moved``: it was pulled by something - an unpicked neighbour, glare)."""
+    res.x[k], res.y[k] = tracker.pos[:, 0], tracker.pos[:, 1]
+    res.xpix[k], res.ypix[k] = np.rint(tracker.pos[:, 0]), np.rint(tracker.pos[:, 1])
+    res.score[k] = 1.0
+    res.sigma[k] = tracker.sigma0
+    res.status[k] = OK
+    moved = tracker.pick_moved
+    res.status[k, moved] = FLAGGED
+    res.reason[k, moved] = _R["pick_moved"]
+
+
+def _track_from_pick_frames(fr, xy_all, ids_all, half_all, pf_all, active, p, camera, progress):
+    """Track markers picked in several frames: each group of markers picked in frame k is
+    tracked forward from k to the end and backward from k to frame 0."""
+    T, N = fr.n, len(ids_all)
+    out = _Results(T, N)
+    out.reason[:, ~active] = _R["no_pick"]
+    for k in np.unique(pf_all[active]).tolist():
+        sel = np.flatnonzero(active & (pf_all == k))
+        res = _Results(T, sel.size)
+        args = (fr[k], xy_all[sel], half_all[sel], p, fr.is_u8, ids_all[sel])
+
+        def start():
+            tracker = _Tracker.from_picks(*args)
+            tracker.hist_t[:] = k
+            tracker.last_ok[:] = k
+            tracker.last_upd[:] = k
+            return tracker
+
+        tracker = start()
+        _seed_row(res, k, tracker)
+        if k < T - 1:
+            _run_pass(fr, tracker, res, range(k + 1, T), 1, None, progress, f"track {camera} from {k}")
+        if k > 0:
+            _run_pass(fr, start(), res, range(k - 1, -1, -1), -1, None, progress, f"back {camera} from {k}")
+        for name in _Results.names + ("status", "reason"):
+            getattr(out, name)[:, sel] = getattr(res, name)
+    return _tracks_frame(out, ids_all, camera)
 
 
 def _expand(res, active):
@@ -245,7 +282,7 @@ def _backward_tracker(fwd, fw, T):
     b.hist_t = np.zeros((n, 3), np.int64)
     b.nh = np.ones(n, np.int64)
     b.lostflag = np.zeros(n, bool)
-    b.sigma = np.ones(n)
+    b.resid_rms = np.ones(n)
     b.last_upd = np.full(n, T - 1, np.int64)
     b.last_ok = np.full(n, T - 1, np.int64)
     b.tplr = [t.copy() for t in fwd.tpl0]
@@ -318,12 +355,7 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
             "(apply_corrections) and re-track from the corrected frame"
         )
     progress_opt = options.pop("progress", progress)
-    opts = {k: options.pop(k) for k in list(options) if k in _PARAM_DEFAULTS}
-    if options:
-        raise TypeError(f"unknown option(s) {sorted(options)}")
-    if "search_radius" in opts and opts["search_radius"] is None:
-        opts.pop("search_radius")
-    p = _Params(**opts)
+    p = _resolve_options(options.pop("options", None), **options)
     tracker = _Tracker.from_picks(fr[frame], seed, np.full(len(pts), -1, np.int64), p, fr.is_u8, pts)
     # the corrected position is the user's: keep it exactly as the seed
     tracker.hist_x[:, 0] = seed
@@ -348,7 +380,7 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
     out = tracks.copy()
     if "reason" not in out.columns:
         out["reason"] = ""
-    for c in ("x_pix", "y_pix"):
+    for c in ("x_pix", "y_pix", "sigma"):
         if c not in out.columns:
             out[c] = np.nan
     mask = out["point"].isin(pts) & (out["frame"] > frame) & (out["frame"] <= stop)
@@ -357,7 +389,7 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
     idx = out.index[mask]
     sub = out.loc[idx, ["frame", "point"]].reset_index()
     sub = sub.merge(new, on=["frame", "point"], how="left")
-    for c in ("x", "y", "score", "status", "x_pix", "y_pix", "reason"):
+    for c in ("x", "y", "score", "status", "x_pix", "y_pix", "reason", "sigma"):
         if c in out.columns:
             out.loc[sub["index"].to_numpy(), c] = sub[c].to_numpy()
     # a re-tracked point must not sit on another point

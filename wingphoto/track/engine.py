@@ -23,13 +23,15 @@ _enabled = NUMBA_AVAILABLE
 
 
 def jit(fn=None, **kw):
-    """Compile ``fn`` with ``numba.njit(cache=True, nogil=True, **kw)`` when numba is
+    """Compile ``fn`` with ``numba.njit(cache=True, nogil=True, error_model="numpy", **kw)`` when numba is
     available; otherwise return it unchanged (it is then only called by tests)."""
     if fn is None:
         return lambda f: jit(f, **kw)
     if _numba is None:
         return fn
-    return _numba.njit(cache=True, nogil=True, **kw)(fn)
+    # error_model="numpy": a division by zero gives inf/NaN as in numpy (a blank or
+    # half-black frame), not a ZeroDivisionError
+    return _numba.njit(cache=True, nogil=True, error_model="numpy", **kw)(fn)
 
 
 def use_numba():

@@ -62,7 +62,7 @@ class IdentityStage:
         if chk.size:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
-            far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.sigma[unk])]
+            far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])]
             bad = np.concatenate([bad, far]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
@@ -156,7 +156,7 @@ class IdentityStage:
             return lose
         # a marker that coasted has a vaguer prediction: it does not take a blob from one
         # tracked on the previous frame
-        cost = np.hypot(XP - prx, YP - pry) / (self.sigma + 0.5 + (self._gap - 1))
+        cost = np.hypot(XP - prx, YP - pry) / (self.resid_rms + 0.5 + (self._gap - 1))
         for a, b in zip(*np.nonzero(same)):
             i, j = si[a], vi[b]
             if merged[i] and merged[j]:

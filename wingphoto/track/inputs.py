@@ -68,10 +68,12 @@ class _Frames:
 
 
 def _parse_picks(picks):
-    """Return (xy (N, 2) float, point ids (N,) int64, half sizes (N,) int or -1)."""
+    """Return (xy (N, 2) float, point ids (N,) int64, half sizes (N,) int or -1, the frame
+    each marker was picked in (N,) int64, 0 by default)."""
     import pandas as pd
 
     half = None
+    frames = None
     if isinstance(picks, (list, tuple)) and picks and isinstance(picks[0], dict):
         picks = pd.DataFrame(list(picks))
     if isinstance(picks, pd.DataFrame):
@@ -83,6 +85,14 @@ def _parse_picks(picks):
             )
         xy = picks[["x", "y"]].to_numpy(np.float64)
         ids = picks["point"].to_numpy(np.int64) if "point" in picks.columns else np.arange(len(picks))
+        if "frame" in picks.columns:
+            fv = pd.to_numeric(picks["frame"], errors="coerce").to_numpy(np.float64)
+            bad_f = ~np.isfinite(fv) | (fv != np.round(fv)) | (fv < 0)
+            if bad_f.any():
+                k = int(np.flatnonzero(bad_f)[0])
+                raise ValueError(f"pick of point {ids[k]} has frame {picks['frame'].iloc[k]!r}: the frame a "
+                                 "marker was picked in must be a whole number >= 0")
+            frames = fv.astype(np.int64)
         if "half_size" in picks.columns:
             half = picks["half_size"].to_numpy(np.float64)
         elif "rect" in picks.columns:
@@ -91,6 +101,8 @@ def _parse_picks(picks):
             half = (np.maximum(rects[:, 2], rects[:, 3]) - 1) / 2
         elif {"rect_w", "rect_h"} <= set(picks.columns):
             half = (np.maximum(picks["rect_w"].to_numpy(float), picks["rect_h"].to_numpy(float)) - 1) / 2
+        elif {"half_w", "half_h"} <= set(picks.columns):
+            half = np.maximum(picks["half_w"].to_numpy(float), picks["half_h"].to_numpy(float))
     else:
         xy = np.asarray(picks, dtype=np.float64)
         if xy.ndim == 1 and xy.size == 2:
@@ -105,12 +117,14 @@ def _parse_picks(picks):
         raise ValueError("picks is empty: click at least one marker")
     bad = ~np.all(np.isfinite(xy), axis=1)
     if bad.all():
-        raise ValueError("picks are all NaN: click at least one marker in frame 0")
+        raise ValueError("picks are all NaN: click at least one marker")
     if len(np.unique(ids)) != len(ids):
         raise ValueError("picks has duplicate point ids; each point must be picked once")
     if half is None:
         half = np.full(len(xy), -1.0)
     half = np.where(np.isfinite(half), half, -1.0)
     half = np.where(half < 0, -1, np.maximum(np.round(half), 2)).astype(np.int64)
-    return xy, ids, half
+    if frames is None:
+        frames = np.zeros(len(xy), np.int64)
+    return xy, ids, half, frames
 

@@ -3,8 +3,137 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import engine
 from .engine import jit
-from .geometry import _nearest_kernel
+from .geometry import _nearest_kernel, _nearest_two
+
+__all__ = ["predict_positions", "start_frame", "update_model"]
+
+
+def predict_positions(hx, ht, nh, t):
+    """Extrapolate each marker's reliable history to frame ``t``.
+
+    Parameters
+    ----------
+    hx : (N, 3, 2) ndarray
+        The last three reliable refined positions (x, y), newest first (NaN where absent).
+    ht : (N, 3) ndarray of int
+        Their frames.
+    nh : (N,) ndarray of int
+        How many of them are known (1-3).
+    t : int
+        Frame to predict.
+
+    Returns
+    -------
+    (N, 2) ndarray
+        Quadratic (Lagrange weights through three points, so gaps are handled), linear with
+        two, constant with one; after a gap of more than 3 frames at most linear, of more
+        than 8 constant (a quadratic explodes over long gaps).
+    """
+    t0, t1, t2 = ht[:, 0], ht[:, 1], ht[:, 2]
+    d = np.abs(t - t0)
+    if np.all((nh == 3) & (d == 1) & (np.abs(t0 - t1) == 1) & (np.abs(t1 - t2) == 1)):
+        return 3.0 * hx[:, 0] - 3.0 * hx[:, 1] + hx[:, 2]
+    order = np.where(d > 3, np.minimum(nh, 2), nh)
+    order = np.where(d > 8, 1, order)
+    tf = float(t)
+    a0, a1, a2 = t0.astype(float), t1.astype(float), t2.astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q0 = (tf - a1) * (tf - a2) / ((a0 - a1) * (a0 - a2))
+        q1 = (tf - a0) * (tf - a2) / ((a1 - a0) * (a1 - a2))
+        q2 = (tf - a0) * (tf - a1) / ((a2 - a0) * (a2 - a1))
+        l0 = (tf - a1) / (a0 - a1)
+        l1 = (tf - a0) / (a1 - a0)
+    c0 = np.where(order == 3, q0, np.where(order == 2, l0, 1.0))
+    c1 = np.where(order == 3, q1, np.where(order == 2, l1, 0.0))
+    c2 = np.where(order == 3, q2, 0.0)
+    h1 = np.where(order[:, None] >= 2, hx[:, 1], 0.0)
+    h2 = np.where(order[:, None] >= 3, hx[:, 2], 0.0)
+    return c0[:, None] * hx[:, 0] + c1[:, None] * h1 + c2[:, None] * h2
+
+
+def _pre_numpy(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+               search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded):
+    """numpy twin of :func:`_pre_kernel` (same arguments, same in-place outputs)."""
+    pred[:] = predict_positions(hx, ht, nh, t)
+    gap[:] = np.abs(t - ht[:, 0])
+    steady[:] = (gap == 1) & (nh == 3) & (np.abs(t - last_ok) == 1)
+    lostflag |= gap > max_coast
+    prx, pry = pred[:, 0], pred[:, 1]
+    inside[:] = ~lostflag & (prx >= -0.5) & (prx <= W - 0.5) & (pry >= -0.5) & (pry <= H - 0.5)
+    px = np.rint(np.where(inside, prx, 0.0))
+    py = np.rint(np.where(inside, pry, 0.0))
+    fits[:] = inside & (px - h >= 0) & (py - h >= 0) & (px + h <= W - 1) & (py + h <= H - 1)
+    n = len(h)
+    if n < 2:
+        j2[:], d2[:] = -1, np.inf
+    else:
+        j, d, _ = _nearest_two(prx, pry, inside)
+        j2[:], d2[:] = j, d
+    jn0 = np.maximum(j2[:, 0], 0)
+    merged[:] = inside & (d2[:, 0] < rb + rb[jn0] + 1.0)
+    crowded[:] = d2[:, 0] < rb + rb[jn0] + 4.0
+    F[:] = (fits & (nh == 3) & (gap == 1) & (sigma < 0.35) & (last_score >= 0.9) & ~crowded
+            & (stagger != t % every))
+    wide[:] = fits & (nh == 1)
+    r[:] = np.where(wide, search_radius,
+                    np.clip(np.ceil(2.0 + 3.0 * sigma + (gap - 1)), 2, search_radius)).astype(np.int64)
+
+
+def start_frame(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+                search_radius):
+    """Predictions and search plan of frame ``t`` (the engine's :func:`_pre_kernel` or
+    :func:`_pre_numpy`); returns a dict of pred, gap, steady, inside, fits, r, F, wide,
+    j2, d2, merged, crowded. Marks markers that coasted beyond ``max_coast`` in
+    ``lostflag``."""
+    n = h.shape[0]
+    o = dict(pred=np.empty((n, 2)), gap=np.empty(n, np.int64), steady=np.empty(n, np.bool_),
+             inside=np.empty(n, np.bool_), fits=np.empty(n, np.bool_), r=np.empty(n, np.int64),
+             F=np.empty(n, np.bool_), wide=np.empty(n, np.bool_), j2=np.empty((n, 2), np.int64),
+             d2=np.empty((n, 2)), merged=np.empty(n, np.bool_), crowded=np.empty(n, np.bool_))
+    fn = _pre_kernel if engine.use_numba() else _pre_numpy
+    fn(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+       search_radius, o["pred"], o["gap"], o["steady"], o["inside"], o["fits"], o["r"], o["F"], o["wide"],
+       o["j2"], o["d2"], o["merged"], o["crowded"])
+    return o
+
+
+def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref,
+                   score_ref, last_upd, par, upd):
+    """numpy twin of :func:`_history_kernel` (same arguments, same in-place outputs)."""
+    ri = np.flatnonzero(rel)
+    if ri.size:
+        us = ri[nh[ri] >= 2]
+        if us.size:
+            e = resid[us]
+            sigma[us] = np.sqrt(0.8 * sigma[us] ** 2 + 0.2 * e * e)
+        hx[ri, 2] = hx[ri, 1]
+        hx[ri, 1] = hx[ri, 0]
+        hx[ri, 0, 0] = X[ri]
+        hx[ri, 0, 1] = Y[ri]
+        ht[ri, 2] = ht[ri, 1]
+        ht[ri, 1] = ht[ri, 0]
+        ht[ri, 0] = t
+        np.minimum(nh + rel, 3, out=nh)
+    ok = ST == 0
+    last_score[:] = np.where(ok & np.isfinite(S), S, 0.0)
+    last_ok[ok] = t
+    mass_ref[ok] = 0.9 * mass_ref[ok] + 0.1 * mass[ok]
+    score_ref[ok] = 0.7 * score_ref[ok] + 0.3 * S[ok]
+    upd[:] = ok & (S >= par[0]) & (S < par[1]) & (np.abs(t - last_upd) >= par[2])
+
+
+def update_model(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref, score_ref,
+                 last_upd, par):
+    """Feed the motion model with the points ``rel`` and update the running values of
+    the ok points (the engine's :func:`_history_kernel` or :func:`_history_numpy`);
+    returns which templates to update."""
+    upd = np.empty(X.shape[0], np.bool_)
+    fn = _history_kernel if engine.use_numba() else _history_numpy
+    fn(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref, score_ref, last_upd,
+       par, upd)
+    return upd
 
 
 @jit

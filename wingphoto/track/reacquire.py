@@ -205,7 +205,7 @@ class ReacquireStage:
             self.hist_x[i, 1] = (rx[0] - vel[0], ry[0] - vel[1])
             self.hist_t[i] = (t, tp, tp - direction)
             self.nh[i] = 2
-            self.sigma[i] = 1.0
+            self.resid_rms[i] = 1.0
             self.lostflag[i] = False
             self.last_ok[i] = t  # checked against the neighbours: the reference from now on
 

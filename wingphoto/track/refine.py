@@ -155,9 +155,33 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
     with np.errstate(invalid="ignore", divide="ignore"):
         bgres = np.sqrt(np.where(rin, res * res, np.float32(0.0)).sum(1) / rin.sum(1)) / peak
     mass = sig.sum(1)
-    wgt = np.maximum(sig - (wfrac * peak)[:, None], np.float32(0.0)) if wfrac > 0 else np.maximum(sig, 0)
+    if wfrac > 0:
+        # weights: the value above the cut, clipped at the blob's median value above the
+        # cut - a bright spot on the marker (a specular highlight) weighs no more than the
+        # rest of its face: the centre is the shape's (a uniform disc is not clipped)
+        cut = (wfrac * peak)[:, None]
+        above = sig > cut
+        level = np.full(n, np.inf, np.float32)
+        has = above.any(1)
+        if has.any():
+            level[has] = np.nanmedian(np.where(above[has], sig[has], np.nan), axis=1)
+        wgt = np.maximum(np.minimum(sig, level[:, None]) - cut, np.float32(0.0))
+    else:
+        wgt = np.maximum(sig, 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         d = (wgt @ grid.gxy) / wgt.sum(1)[:, None]
+        # the centroid's sensitivity to pixel noise: per-axis std of the centroid for a
+        # unit noise on every pixel that carries weight
+        supp = wgt > 0
+        ex = grid.gx[None, :] - np.nan_to_num(d[:, 0:1])
+        ey = grid.gy[None, :] - np.nan_to_num(d[:, 1:2])
+        spread = np.sqrt(0.5 * np.where(supp, ex * ex + ey * ey, 0.0).sum(1)) / wgt.sum(1)
+        # how far the weighted centre is from the centre of the weighted pixels' mask: an
+        # asymmetric blob (texture, a lobe, a highlight) - a bias the noise does not tell
+        nsup = supp.sum(1)
+        mx = np.where(supp, grid.gx[None, :], 0.0).sum(1) / nsup
+        my = np.where(supp, grid.gy[None, :], 0.0).sum(1) / nsup
+        dshape = np.hypot(mx - d[:, 0], my - d[:, 1])
     fx = np.nan_to_num(d[:, 0:1]).astype(np.float32)
     fy = np.nan_to_num(d[:, 1:2]).astype(np.float32)
     frac = np.zeros(n)
@@ -192,7 +216,8 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
             img = frame[np.clip(iy[w] + v, 0, H - 1), np.clip(ix[w] + u, 0, W - 1)].astype(np.float64)
             vals.append(sign[w] * img - (coef[w, 0] + coef[w, 1] * u + coef[w, 2] * v))
         valley[w] = np.min(vals, axis=0) / peak[w]
-    return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley)
+    return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley,
+                spread=spread, dshape=dshape)
 
 
 
@@ -259,7 +284,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
     Returns dx, dy, mass, peak, nout (not explained by the neighbour), frac, dip, omin,
-    bgres, valley."""
+    bgres, valley, spread, dshape."""
     H, W = frame.shape
     hc = int(np.ceil(r)) + 3
     near = not np.isnan(nx_)
@@ -316,16 +341,33 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
     cut = wfrac * peak if wfrac > 0 else 0.0
+    # the clip level: the blob's median value above the cut (see :func:`_centroid_pass`)
+    level = np.inf
+    if wfrac > 0:
+        nl = 0
+        for k in range(nd):
+            res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+            if res > cut:
+                rval[nr + nl] = res  # (scratch: the buffer holds the ring, then room)
+                nl += 1
+        if nl > 0:
+            level = np.median(rval[nr: nr + nl])
     mass = 0.0
     sw = swx = swy = 0.0
+    nw = su = sv = suu = svv = 0.0
     for k in range(nd):
         res = dval[k] - (pa + pb * du[k] + pc * dv[k])
         mass += res
-        w = res - cut
+        w = min(res, level) - cut
         if w > 0:
             sw += w
             swx += w * du[k]
             swy += w * dv[k]
+            nw += 1.0
+            su += du[k]
+            sv += dv[k]
+            suu += du[k] * du[k]
+            svv += dv[k] * dv[k]
     sbg = 0.0
     nbg = 0
     for k in range(nr):
@@ -336,6 +378,12 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     dx = swx / sw if sw > 0 else np.nan
     dy = swy / sw if sw > 0 else np.nan
     bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
+    spread = np.nan
+    dshape = np.nan
+    if sw > 0:
+        q = suu - 2.0 * dx * su + nw * dx * dx + svv - 2.0 * dy * sv + nw * dy * dy
+        spread = np.sqrt(0.5 * max(q, 0.0)) / sw
+        dshape = np.hypot(su / nw - dx, sv / nw - dy)
     # ring outliers not on the known neighbour's blob: how one-sided, how near
     fx = dx if sw > 0 else 0.0
     fy = dy if sw > 0 else 0.0
@@ -376,7 +424,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     frac = nexp / max(nr, 1) if nexp > 0 else 0.0
     dip = np.hypot(ux, uy) / nexp if nexp > 0 else 0.0
     omin = np.sqrt(omin2) if nexp > 0 else np.inf
-    return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley
+    return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley, spread, dshape
 
 
 @jit
@@ -392,7 +440,8 @@ def _buffers(rd):
 @jit
 def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rmax, wfrac, ff, fn, out):
     """Compiled twin of :func:`_refine_core` (the iterated centroid of each marker);
-    ``out`` (n, 8) receives x, y, mass, peak, foreign, bgres, valley and the disk radius."""
+    ``out`` (n, 9) receives x, y, mass, peak, foreign, bgres, valley, the disk radius
+    the spread and dshape."""
     H, W = frame.shape
     rgrow = np.empty(rd.shape[0])
     for i in range(rd.shape[0]):
@@ -406,14 +455,14 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
         cy = min(max(int(np.rint(yi)), 0), H - 1)
         it = 0
         grow = 2
-        mass = peak = bg = valley = np.nan
+        mass = peak = bg = valley = spread = dshape = np.nan
         foreign = False
         while True:
             nx_ = nbx[i] - cx
             ny_ = nby[i] - cy
             res = _pass1(frame, cx, cy, r, sign[i], nx_, ny_, noise[i], nbr_r[i], wfrac, ff, fn,
                          du, dv, dval, ru, rv, rval, routl)
-            dx, dy, m, pk, nout, frac, dip, omin, b, vl = res
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl, spread, dshape = res
             good = m > 0
             if good:
                 xi = cx + dx
@@ -444,13 +493,15 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
         out[i, 5] = bg
         out[i, 6] = valley
         out[i, 7] = r
+        out[i, 8] = spread
+        out[i, 9] = dshape
 
 
 
 
 @jit
 def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, wfrac, ff, fn, X, Y, mass,
-                       foreign, bgres, peak, valley, nbr_out):
+                       foreign, bgres, peak, valley, spread, dshape, nbr_out):
     """The tracker's refinement of markers ``idx`` in one call: each marker's pixel split
     against its nearest matched neighbour (as :meth:`_Tracker._voronoi`) and its iterated
     centroid (as :func:`_refine_core`, the disk fixed), results written at ``idx``."""
@@ -480,7 +531,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
         cy = min(max(int(np.rint(yi)), 0), H - 1)
         it = 0
         while True:
-            dx, dy, m, pk, nout, frac, dip, omin, b, vl = _pass1(
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh = _pass1(
                 frame, cx, cy, r, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
                 du, dv, dval, ru, rv, rval, routl)
             good = m > 0
@@ -491,6 +542,8 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
             peak[i] = pk
             bgres[i] = b
             valley[i] = vl
+            spread[i] = sp
+            dshape[i] = dsh
             foreign[i] = nout > 0 and omin <= r + 1.0
             it += 1
             kx = min(max(int(np.rint(xi)), 0), W - 1)
@@ -559,6 +612,8 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
     peak = np.full(n, np.nan)
     bgres = np.full(n, np.nan)
     valley = np.full(n, np.nan)
+    spread = np.full(n, np.nan)
+    dshape = np.full(n, np.nan)
     foreign = np.zeros(n, bool)
     grow = np.full(n, 2)
     todo = np.arange(n)
@@ -575,7 +630,8 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
         nx = np.where(good, jx + d[:, 0], x[todo])
         ny = np.where(good, jy + d[:, 1], y[todo])
         x[todo], y[todo], mass[todo] = nx, ny, m
-        peak[todo], bgres[todo], valley[todo] = r["peak"], r["bgres"], r["valley"]
+        peak[todo], bgres[todo], valley[todo], spread[todo] = r["peak"], r["bgres"], r["valley"], r["spread"]
+        dshape[todo] = r["dshape"]
         # own blob larger than the disk: ring outliers all around (not one-sided); the
         # disk grows, and if the ring is still not clean something else is there
         spill = (r["nout"] > 0) & ((r["frac"] > 0.4) | (r["dip"] < 0.5))
@@ -591,13 +647,13 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
         grow[todo[spill]] -= 1
         todo = todo[redo]
         ix[todo], iy[todo] = kx[redo], ky[redo]
-    return x, y, mass, rd, peak, foreign, bgres, valley
+    return x, y, mass, rd, peak, foreign, bgres, valley, spread, dshape
 
 
 def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac):
     """:func:`_refine_core` by the compiled kernel."""
     n = len(x)
-    out = np.empty((n, 8))
+    out = np.empty((n, 10))
     if nbr_xy is None:
         nbx = nby = np.full(n, np.nan)
     else:
@@ -607,7 +663,7 @@ def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, r
     _refine_kernel(frame, np.asarray(x, np.float64), np.asarray(y, np.float64), np.asarray(rd, np.float64),
                    np.asarray(sign, np.float64), np.asarray(noise, np.float64), nbx, nby, rr, int(iterations),
                    np.asarray(rmax, np.float64), float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out)
-    return out[:, 0], out[:, 1], out[:, 2], out[:, 7], out[:, 3], out[:, 4] > 0, out[:, 5], out[:, 6]
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 7], out[:, 3], out[:, 4] > 0, out[:, 5], out[:, 6], out[:, 8], out[:, 9]
 
 
 def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, nbr_r=None,
@@ -630,7 +686,7 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
     n = len(x)
     rmax = np.asarray(rd, np.float64) if rmax is None else np.broadcast_to(np.asarray(rmax, np.float64), (n,))
     core = _refine_core if not engine.use_numba() else _refine_core_fast
-    x, y, mass, rd, peak, foreign, bgres, valley = core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations,
+    x, y, mass, rd, peak, foreign, bgres, valley, spread, dshape = core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations,
                                                         rmax, wfrac)
     if explain is not None:
         rows = np.flatnonzero(foreign & (mass > 0) & np.asarray(explain, bool))
@@ -648,10 +704,10 @@ def _refine(frame, x, y, rd, sign, noise, nbr_xy=None, iterations=2, rmax=None, 
                 r2 = core(frame, x[rows], y[rows], rd[rows], np.asarray(sign)[rows], np.asarray(noise)[rows], f,
                           rd[rows], 1, rd[rows], wfrac)
                 x[rows], y[rows], mass[rows], rd[rows], peak[rows] = r2[0], r2[1], r2[2], r2[3], r2[4]
-                bgres[rows], valley[rows] = r2[6], r2[7]
+                bgres[rows], valley[rows], spread[rows], dshape[rows] = r2[6], r2[7], r2[8], r2[9]
                 # a foreign blob split off is only harmless when a dark gap separates them
                 foreign[rows] = r2[5] | ~(r2[7] < _MERGE_VALLEY)
-    return x, y, mass, dict(rd=rd, peak=peak, foreign=foreign, bgres=bgres, valley=valley)
+    return x, y, mass, dict(rd=rd, peak=peak, foreign=foreign, bgres=bgres, valley=valley, spread=spread, dshape=dshape)
 
 
 def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iterations=2,
@@ -677,11 +733,12 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
         Re-centre the disk on the pixel nearest the estimate and repeat (default 2).
     threshold : float
         Each pixel is weighted by its background-subtracted value minus ``threshold``
-        times the blob's peak (0: the plain background-subtracted centroid). The default
-        (0.2) makes the centre insensitive to what the disk holds besides the blob (a
-        membrane edge, glare, the tail of another blob) at the cost of a slight pixel
-        locking on blobs with hard edges (< 0.03 px on an unblurred disc, < 0.01 px with
-        the optics' blur).
+        times the blob's peak (0: the plain background-subtracted centroid), clipped at the
+        blob's median value above that cut, so that the centre is the blob's shape's (a specular highlight does not pull it). The default (0.2)
+        makes the centre insensitive to what the disk holds besides the blob (a membrane
+        edge, glare, the tail of another blob) at the cost of a slight pixel locking on
+        blobs with hard edges (< 0.035 px on an unblurred disc, < 0.01 px with the optics'
+        blur).
 
     Returns
     -------

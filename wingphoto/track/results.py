@@ -5,14 +5,16 @@ import numpy as np
 
 from .status import _R, FLAGGED, LOST, OK, REASONS, STATUS
 
-#: pixel-level match and the reason of a flag.
-TRACKER_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status", "x_pix", "y_pix", "reason"]
+#: Columns of :func:`~wingphoto.track.track_markers`' result: :data:`wingphoto.io.TRACK_COLUMNS` plus
+#: the pixel-level match, the reason of a flag and ``sigma``, the 1-sigma per-axis
+#: uncertainty of the position (px).
+TRACKER_COLUMNS = ["camera", "frame", "point", "x", "y", "score", "status", "x_pix", "y_pix", "reason", "sigma"]
 
 
 class _Results:
     """Preallocated (T, N) result arrays of one pass."""
 
-    names = ("x", "y", "score", "xpix", "ypix")
+    names = ("x", "y", "score", "xpix", "ypix", "sigma")
 
     def __init__(self, T, N):
         for k in self.names:
@@ -29,7 +31,6 @@ class _Results:
     def load(self, d, prefix):
         for k in self.names + ("status", "reason"):
             getattr(self, k)[...] = d[prefix + k]
-
 
 
 def _tracks_frame(res, ids, camera, frames_idx=None):
@@ -51,6 +52,7 @@ def _tracks_frame(res, ids, camera, frames_idx=None):
             "x_pix": res.xpix.ravel(),
             "y_pix": res.ypix.ravel(),
             "reason": reason_names[res.reason.ravel()],
+            "sigma": res.sigma.ravel(),
         }
     )
     df["camera"] = df["camera"].astype(str)

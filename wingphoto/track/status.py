@@ -1,11 +1,19 @@
-"""Statuses, reasons and the status rules of a point-frame (both engines)."""
+"""Statuses, reasons and the status rules of a point-frame.
+
+The rules are ONE ordered table, :data:`RULES`: each engine computes the same condition
+matrix (:func:`_conditions_kernel`, compiled, or its numpy twin :func:`_conditions_numpy`),
+and :func:`apply_rules` gives every point the status and reason of the *last* rule that
+applies (so a later rule overrides an earlier one: a point whose score fell below
+``lost_score`` is lost, whatever else was wrong with it).
+"""
 from __future__ import annotations
 
 import numpy as np
 
+from . import engine
 from .engine import jit
 
-STATUS = ("ok", "flagged", "lost", "manual")
+STATUS = ("ok", "flagged", "lost", "manual", "interpolated")
 OK, FLAGGED, LOST, MANUAL = 0, 1, 2, 3
 #: Reasons a point is flagged or lost (the ``reason`` column; "" when ok).
 REASONS = (
@@ -27,51 +35,58 @@ REASONS = (
     "pick_moved",
     "foreign",
     "background",
+    "imprecise",
+    "blank",
+    "constellation",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
-_RULE_CODES = np.array([_R[k] for k in ("low_score", "no_signal", "merged", "appearance", "ambiguous", "jump",
-                                        "foreign", "background", "conflict")], np.int8)
+
+#: The status rules, in order (the last that applies wins): (reason, status, condition).
+RULES = (
+    ("low_score", FLAGGED, "score < min_score"),
+    ("no_signal", FLAGGED, "mass < min_mass_ratio * frame-0 mass"),
+    ("merged", FLAGGED, "mass > max_mass_ratio * running mass (off by default)"),
+    ("appearance", FLAGGED, "score < running score - max_score_drop (off by default)"),
+    ("ambiguous", FLAGGED, "an unexplained second correlation peak within ambiguity_margin"),
+    ("jump", FLAGGED, "refined point further from the prediction than the motion model allows"),
+    ("foreign", FLAGGED, "something bright no known marker explains touches the disk"),
+    ("imprecise", FLAGGED, "sigma > max_sigma"),
+    ("merged", FLAGGED, "the blob touches a neighbour's without a dark gap, or a bright bridge joins them"),
+    ("conflict", FLAGGED, "another marker took this marker's blob"),
+    ("low_score", LOST, "score < lost_score, or no positive mass"),
+)
+_RULE_STATUS = np.array([r[1] for r in RULES], np.int8)
+_RULE_REASON = np.array([_R[r[0]] for r in RULES], np.int8)
+N_RULES = len(RULES)
 #: Flags about a point's precision, not its identity.
-_SOFT = np.array([_R[k] for k in ("merged", "foreign", "background")], np.int8)
+_SOFT = np.array([_R[k] for k in ("merged", "foreign", "background", "imprecise")], np.int8)
 _IS_SOFT = np.isin(np.arange(len(REASONS)), _SOFT)
 
 
 @jit
-def _rules_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, bgres, peak,
-                  peak0, XP, YP, prx, pry, inside, j2, rb, valley, lose, par, ST, RS, X, Y, codes):
-    """Compiled status rules of :meth:`_Tracker.step` (the last rule that applies wins),
-    then a conflict loser is put at its prediction and a lost point's position cleared.
-    ``par``: min_score, lost_score, min_mass_ratio, max_mass_ratio, max_score_drop,
-    ambiguity_margin, jump_px, bg residual, faded bg residual, faded, weak, merge valley,
-    bridge; ``codes``: the reason codes of low_score, no_signal, merged, appearance,
-    ambiguous, jump, foreign, background, conflict."""
+def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, imprecise,
+                       XP, YP, prx, pry, inside, j2, rb, valley, lose, par, cond):
+    """Compiled condition matrix ``cond`` (n, N_RULES) of :data:`RULES` (rows of markers
+    whose window fits; the others stay False). ``par``: min_score, lost_score,
+    min_mass_ratio, max_mass_ratio, max_score_drop, ambiguity_margin, jump_px, merge
+    valley, bridge."""
     n = fits.shape[0]
     for i in range(n):
+        for k in range(cond.shape[1]):
+            cond[i, k] = False
         if not fits[i]:
             continue
         sc = S[i]
         ms = mass[i]
-        st = 0
-        rs = 0
-        if sc < par[0]:
-            st, rs = 1, codes[0]
-        if ms < par[2] * mass0[i]:
-            st, rs = 1, codes[1]
-        if np.isfinite(par[3]) and ms > par[3] * mass_ref[i]:
-            st, rs = 1, codes[2]
-        if np.isfinite(par[4]) and sc < score_ref[i] - par[4]:
-            st, rs = 1, codes[3]
-        if SEC[i] >= sc - par[5]:
-            st, rs = 1, codes[4]
+        cond[i, 0] = sc < par[0]
+        cond[i, 1] = ms < par[2] * mass0[i]
+        cond[i, 2] = np.isfinite(par[3]) and ms > par[3] * mass_ref[i]
+        cond[i, 3] = np.isfinite(par[4]) and sc < score_ref[i] - par[4]
+        cond[i, 4] = SEC[i] >= sc - par[5]
         lim = max(par[6], 4.0 * sigma[i] + 2.0 * (gap[i] - 1))
-        if nh[i] >= 3 and resid[i] > lim:
-            st, rs = 1, codes[5]
-        if foreign[i]:
-            st, rs = 1, codes[6]
-        bg = bgres[i]
-        faded = peak[i] < par[9] * peak0[i] or sc < par[10]
-        if bg > par[7] or (faded and bg > par[8]):
-            st, rs = 1, codes[7]
+        cond[i, 5] = nh[i] >= 3 and resid[i] > lim
+        cond[i, 6] = foreign[i]
+        cond[i, 7] = imprecise[i]
         # blobs touching a neighbour's (matched, or predicted if tracked last frame)
         touch = False
         xi = XP[i] if not np.isnan(XP[i]) else (prx[i] if inside[i] and gap[i] == 1 else np.nan)
@@ -85,19 +100,57 @@ def _rules_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, 
             if np.hypot(xj - xi, yj - yi) < rb[i] + rb[j] + 1.0:
                 touch = True
         vl = valley[i]
-        if (touch and not (vl < par[11])) or vl > par[12]:
-            st, rs = 1, codes[2]
-        if lose[i]:
-            st, rs = 1, codes[8]
-        if ((sc < par[1]) or not (ms > 0)) and not lose[i]:
-            st, rs = 2, codes[0]
-        ST[i] = st
-        RS[i] = rs
-        if lose[i]:
-            X[i] = prx[i]
-            Y[i] = pry[i]
-        if st == 2:
-            X[i] = np.nan
-            Y[i] = np.nan
+        cond[i, 8] = (touch and not (vl < par[7])) or vl > par[8]
+        cond[i, 9] = lose[i]
+        cond[i, 10] = ((sc < par[1]) or not (ms > 0)) and not lose[i]
 
 
+def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, imprecise,
+                      XP, YP, prx, pry, inside, j2, rb, valley, lose, par, cond):
+    """numpy twin of :func:`_conditions_kernel` (same arguments, same output)."""
+    with np.errstate(invalid="ignore"):
+        lim = np.maximum(par[6], 4.0 * sigma + 2.0 * (gap - 1))
+        px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
+        py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
+        j = np.maximum(j2, 0)
+        d = np.hypot(px[j] - px[:, None], py[j] - py[:, None])
+        d[j2 < 0] = np.inf
+        touch = (d < rb[:, None] + rb[j] + 1.0).any(1)
+        c = np.column_stack([
+            S < par[0],
+            mass < par[2] * mass0,
+            np.isfinite(par[3]) & (mass > par[3] * mass_ref),
+            np.isfinite(par[4]) & (S < score_ref - par[4]),
+            SEC >= S - par[5],
+            (nh >= 3) & (resid > lim),
+            foreign,
+            imprecise,
+            (touch & ~(valley < par[7])) | (valley > par[8]),
+            lose,
+            ((S < par[1]) | ~(mass > 0)) & ~lose,
+        ])
+    cond[:] = c & fits[:, None]
+
+
+def rule_conditions(*args):
+    """Condition matrix of :data:`RULES` by the engine in use (see :func:`_conditions_kernel`)."""
+    fits = args[0]
+    cond = np.empty((fits.shape[0], N_RULES), np.bool_)
+    (_conditions_kernel if engine.use_numba() else _conditions_numpy)(*args, cond)
+    return cond
+
+
+def apply_rules(cond, ST, RS):
+    """Give each point with a rule that applies the status and reason of the last one.
+
+    Parameters
+    ----------
+    cond : (n, N_RULES) ndarray of bool
+    ST, RS : (n,) ndarray of int8
+        Status and reason codes, changed in place where a rule applies; where none does,
+        ``ST`` is set to ok (for the rows ``rows``).
+    """
+    any_ = cond.any(1)
+    last = N_RULES - 1 - np.argmax(cond[:, ::-1], axis=1)
+    ST[any_] = _RULE_STATUS[last[any_]]
+    RS[any_] = _RULE_REASON[last[any_]]
