@@ -68,6 +68,7 @@ from .track import (
     retrack_from,
     save_corrections,
     track_markers,
+    TrackOptions,
 )
 from .video import write_tracking_video
 from .pipeline import calibrate_folders, load_picks, run_demo, track_folder, track_stereo, triangulate_files
