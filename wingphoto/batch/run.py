@@ -331,7 +331,8 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
     cluster_options : dict, optional
         Extra keyword arguments of ``dask.distributed.LocalCluster`` (e.g.
         ``{"processes": False}`` for threads in this process, ``{"dashboard_address":
-        ":8787"}``).
+        None}`` for no dashboard; default one worker process per worker, one thread each,
+        dashboard on port 8787 or the next free one).
     notify : callable, optional
         Called with one line of text for a person when the engine starts (the engine, and
         the Dask dashboard address when one runs); default: logged at INFO level.
@@ -415,7 +416,8 @@ def run_batch(manifest, *, out, scheduler=None, workers=None, progress=True, cac
                     results = _distributed(plan, cache_dir, check_dir, bar, client)
             else:
                 n = int(workers) if workers is not None else max(1, min(os.cpu_count() or 1, 2 * len(plan)))
-                options = {"n_workers": n, "threads_per_worker": 1, "processes": True, "dashboard_address": ":0"}
+                options = {"n_workers": n, "threads_per_worker": 1, "processes": True,
+                           "dashboard_address": ":8787"}  # Dask moves it to a free port when taken
                 options.update(cluster_options or {})
                 import dask
 
