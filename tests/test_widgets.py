@@ -4,6 +4,7 @@ The views are driven through their handlers (display coordinates) and ``Button.c
 with the Agg backend; no browser is involved.
 """
 import json
+import os
 import sys
 import types
 
@@ -837,3 +838,65 @@ def test_window_picker_routes_real_matplotlib_events(tmp_path):
     np.testing.assert_allclose(w.state.get("right", 1)[1:3], (31.0, 21.0), atol=0.05)
     KeyEvent("key_press_event", canvas, "s", u, v)._process()
     assert (tmp_path / "picks.json").is_file() and "saved 4 picks" in w.message
+
+
+def test_cli_pick_in_a_real_tk_window(tmp_path):
+    """`wingphoto pick` opens a real Tk window (under Xvfb); clicks injected by Tk land on the markers."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    samples = repo / "data-samples" / "flapping"
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("xvfb-run not installed (apt-get install xvfb): no display for a real window")
+    if not samples.is_dir():
+        pytest.skip("data-samples absent")
+    try:
+        import tkinter  # noqa: F401
+    except ImportError:
+        pytest.skip("tkinter absent: no GUI backend for matplotlib")
+    out = tmp_path / "picks.json"
+    script = tmp_path / "drive.py"
+    script.write_text(f'''
+import sys
+import matplotlib.pyplot as plt
+import pandas as pd
+from wingphoto.cli import main
+truth = pd.read_csv({str(samples / "truth_tracks.csv")!r}).query("frame == 0 and point < 2")
+show = plt.show
+def drive(*args, **kwargs):
+    fig = plt.gcf()
+    tk = fig.canvas.get_tk_widget()
+    def act():
+        for ax, cam in zip(fig.axes, ("left", "right")):
+            for r in truth[truth.camera == cam].itertuples():
+                tk.update()  # the window may still be settling its size: measure before each click
+                fig.canvas.draw()
+                u, v = ax.transData.transform((r.x, r.y))
+                y = fig.bbox.height - v  # Tk's y points down
+                for kind in ("<ButtonPress-1>", "<ButtonRelease-1>"):
+                    tk.event_generate(kind, x=int(round(u)), y=int(round(y)))
+                tk.update()
+        tk.event_generate("<KeyPress>", keysym="q", x=5, y=5)
+        tk.update()
+    tk.after(2000, act)
+    show(*args, **kwargs)
+plt.show = drive
+sys.exit(main(["pick", {str(samples / "left")!r}, {str(samples / "right")!r}, "--out", {str(out)!r}, "--n-points", "2"]))
+''')
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLBACKEND", "DISPLAY")}
+    run = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", sys.executable, str(script)],
+                         capture_output=True, text=True, timeout=300, env=env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "wrote" in run.stdout and "2 markers left, 2 markers right" in run.stdout
+    import pandas as pd
+
+    from wingphoto.picks import read_picks
+
+    truth = pd.read_csv(samples / "truth_tracks.csv").query("frame == 0 and point < 2")
+    got = read_picks(out).merge(truth, on=["camera", "point"], suffixes=("", "_true"))
+    assert len(got) == 4
+    # one screen pixel of the window is about 0.9 image px: every click within a screen pixel
+    assert np.hypot(got["x"] - got["x_true"], got["y"] - got["y_true"]).max() < 1.0
