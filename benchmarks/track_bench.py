@@ -10,7 +10,13 @@
   in a subprocess with ``WINGPHOTO_NO_NUMBA=1``);
 * ``track_thesis`` (wingphoto.thesis: NCC.m + trackcl.m, the thesis baseline);
 * ``trackpy.locate`` (a peer: bandpass + peak finding + centroid refinement per frame,
-  no linking), ``diameter`` the odd size just above the marker diameter.
+  no linking), ``diameter`` the odd size just above the marker diameter;
+* ``track_markers`` on a realistic wing render (:func:`wingphoto.synth.render_flapping`:
+  perspective, shading, 26 markers; one wing beat cycled to 1000 frames) next to the disc
+  row, with the ratio of the two (wall clock and CPU time).
+
+Every run prints the library versions (Python, numpy, numba, OpenCV), the CPU count and
+the load average with the figures: on a shared machine compare the CPU-time column.
 
 The sequence is rendered first (anti-aliased discs moving as on a flapping wing, periodic
 so that it can be cycled without a jump) and held in memory, so decoding is not timed.
@@ -21,7 +27,9 @@ streamed: what grows is only the result table (~0.5 kB per frame for 30 markers)
 The target of issue 4 is >= 3000 frames/s per camera (the cameras' own rate). Timings
 depend on the machine and its load: the script prints the CPU count and load average.
 
-``python benchmarks/track_bench.py --sweep``: tracks hard ``wingphoto.synth`` sequences
+``python benchmarks/track_bench.py --sweep [--sweep-args ...]`` runs the validation sweep
+of ``benchmarks/track_sweep.py`` (the synth scenarios); ``--sweep --legacy-sweep``: tracks
+hard ``wingphoto.synth`` sequences
 (110 deg stroke, glare, motion blur, edge-on markers) started at several stroke phases
 and seeds - markers invisible in frame 0 have no pick - and prints, per sequence and
 camera, the share of visible point-frames reported ok and the largest error of an ok
@@ -143,6 +151,27 @@ def _rate_without_numba(frames, repeat):
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def versions():
+    """One line: the libraries and machine every figure depends on."""
+    import platform
+
+    import cv2
+
+    import wingphoto.track as wt
+
+    try:
+        import numba
+
+        nb = numba.__version__
+    except ImportError:
+        nb = "not installed"
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (np.nan,) * 3
+    return (f"Python {platform.python_version()}, numpy {np.__version__}, numba {nb} "
+            f"({'used' if wt.engine.use_numba() else 'not used'}), OpenCV {cv2.__version__} "
+            f"({cv2.getNumThreads()} threads); {os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} "
+            f"{load[2]:.2f}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=300, help="frames for track_markers (default 300)")
@@ -156,22 +185,27 @@ def main(argv=None):
                     help="stroke phases (deg) of the sweep's sequences")
     ap.add_argument("--seeds", type=int, nargs="*", default=list(range(10)), help="their seeds")
     ap.add_argument("--sweep-frames", type=int, default=100, help="frames per sweep sequence (default 100)")
+    ap.add_argument("--legacy-sweep", action="store_true", help="the older phase sweep of this script")
+    ap.add_argument("--sweep-args", nargs=argparse.REMAINDER, default=[],
+                    help="arguments passed on to benchmarks/track_sweep.py")
+    ap.add_argument("--realistic-frames", type=int, default=100,
+                    help="frames of the realistic wing render, cycled to 1000 (default 100: one beat)")
     args = ap.parse_args(argv)
 
     if args.sweep:
+        sweep_script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "track_sweep.py")
+        if os.path.exists(sweep_script) and not args.legacy_sweep:
+            # the validation sweep over the synth scenarios (benchmarks/track_sweep.py)
+            return subprocess.call([sys.executable, sweep_script] + list(args.sweep_args))
         if len(args.phases) != len(args.seeds):
             ap.error("--phases and --seeds must have the same length (they are paired)")
         return 0 if sweep(args.phases, args.seeds, args.sweep_frames) else 1
 
-    import cv2
-
     import wingphoto.track as wt
     from wingphoto.track import track_markers
 
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (np.nan,) * 3
-    numba = "numba " + wt._numba.__version__ if wt._numba is not None else "no numba"
-    print(f"machine: {os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; "
-          f"OpenCV {cv2.__version__} ({cv2.getNumThreads()} threads); {numba}")
+    print(versions())
+    print(f"engine: {'compiled (numba)' if wt.engine.use_numba() else 'numpy/OpenCV'}")
     period = 100
     block, truth, diam = wing_sequence(period, period=period)
     T = args.frames
@@ -190,7 +224,21 @@ def main(argv=None):
                  f"ok {ok.mean():.3f}, RMS {np.sqrt(np.mean(err[ok] ** 2)):.3f} px"))
     (dt, cpu), _ = timed(lambda: track_markers(CycledFrames(block, 1000), picks, progress=False), args.repeat)
     rows.append(("track_markers (1000 frames)", 1000 / dt, 1000 / cpu, "the start (~15 ms) spread over more frames"))
-    if wt._numba is not None:
+    disc = rows[-1]
+    # a realistic wing: wingphoto.synth.render_flapping (perspective, shading, ~26 markers),
+    # one wing beat rendered and cycled to 1000 frames
+    from wingphoto import synth
+
+    wing = synth.render_flapping(n_frames=args.realistic_frames, preset="clean", seed=0)
+    wblock = wing.frames("left")
+    wpicks = wing.picks("left")
+    track_markers(CycledFrames(wblock, 5), wpicks, progress=False)
+    (dt, cpu), wtr = timed(lambda: track_markers(CycledFrames(wblock, 1000), wpicks, progress=False), args.repeat)
+    nw = int(np.isfinite(wpicks[:, 0]).sum())
+    rows.append((f"track_markers (wing render, 1000)", 1000 / dt, 1000 / cpu,
+                 f"{nw} markers, {wblock.shape[1]}x{wblock.shape[2]}; ok {np.mean(wtr.status == 'ok'):.3f}; "
+                 f"wall {1000 / dt / disc[1]:.2f}x, CPU {1000 / cpu / disc[2]:.2f}x the disc row"))
+    if wt.engine.use_numba():
         rows.append(("track_markers (no numba)", _rate_without_numba(T, args.repeat), np.nan,
                      "numpy/OpenCV code only (WINGPHOTO_NO_NUMBA=1)"))
     (dt, cpu), tr = timed(lambda: track_markers(frames, picks, search_every=1, progress=False), args.repeat)
@@ -231,6 +279,7 @@ def main(argv=None):
     for name, fps, cfps, note in rows:
         print(f"{name:34s} {fps:9.0f} {cfps:7.0f} {fps / ref:9.1f}  {note}")
     print("frames/s: wall clock, best of runs; (CPU): frames per second of process CPU time")
+    print(versions())
     print("target: track_markers >= 3000 frames/s per camera")
 
     print("\npeak memory of track_markers (tracemalloc), frames produced lazily:")
