@@ -230,10 +230,10 @@ def _sequential(plan, cache_dir, check_dir, bar):
                     calibrations[key] = exc
             if isinstance(calibrations[key], TrialError):
                 raise calibrations[key]
-            pair = (t.left, t.right)
+            pair = (t.left, t.right, key)
             if pair not in checks:
                 try:
-                    checks[pair] = check_sequences(t.left, t.right, check_dir)
+                    checks[pair] = check_sequences(t.left, t.right, check_dir, calibrations[key])
                 except TrialError as exc:
                     checks[pair] = exc
             if isinstance(checks[pair], TrialError):
@@ -271,9 +271,9 @@ def _distributed(plan, cache_dir, check_dir, bar, client):
             calibrations[key] = client.submit(calibrate_shared, t.calibration, str(cache_dir),
                                               key=f"calibrate-{key}-{token}", pure=False)
         name = f"{t.id}-{token}"
-        pair = (t.left, t.right)
+        pair = (t.left, t.right, key)
         if pair not in checks:
-            checks[pair] = client.submit(check_sequences, t.left, t.right, str(check_dir),
+            checks[pair] = client.submit(check_sequences, t.left, t.right, str(check_dir), calibrations[key],
                                          key=f"check-{len(checks)}-{token}", pure=False)
         check = checks[pair]
         left = client.submit(track_camera, t, "left", str(work), check, key=f"track-left-{name}", pure=False)

@@ -229,14 +229,16 @@ def _open_sequence(trial, camera):
     return seq, numbers
 
 
-def check_sequences(left, right, log_dir):
+def check_sequences(left, right, log_dir, calibration=None):
     """Check a left/right pair of recordings (duplicates, blanks, gaps, jumps, offset).
 
     Uses :func:`wingphoto.integrity.check_stereo_sequences` on the whole recordings, not
     only a trial's frame range: a dropped or doubled frame anywhere before the range puts
     the two views out of step inside it, and the offset estimate needs the motion of many
-    frames. Trials cut from the same recordings share one check. Skipped, with a note,
-    when ``wingphoto.integrity`` is not available.
+    frames. Trials cut from the same recordings share one check. With ``calibration``
+    (a :func:`calibrate_shared` result) the rig is passed on, so the left/right offset comes
+    from epipolar geometry. Skipped, with a note, when ``wingphoto.integrity`` is not
+    available.
 
     Returns
     -------
@@ -244,7 +246,8 @@ def check_sequences(left, right, log_dir):
         ``ok`` (bool), ``text`` (the report), ``wall_s``, ``cpu_s``. A failed check is
         not raised here: :func:`track_camera` stops the trial unless it sets ``force``.
     """
-    key = hashlib.sha256(f"{left}\n{right}".encode()).hexdigest()[:16]
+    rig_key = (calibration or {}).get("key", "")
+    key = hashlib.sha256(f"{left}\n{right}\n{rig_key}".encode()).hexdigest()[:16]
     with _stage("(shared)", "check sequences", Path(log_dir) / f"check-{key}.log") as timing:
         try:
             from ..integrity import check_stereo_sequences
@@ -252,7 +255,14 @@ def check_sequences(left, right, log_dir):
             text = "sequence check skipped: wingphoto.integrity.check_stereo_sequences is not available"
             ok = True
         else:
-            report = check_stereo_sequences(left, right)
+            import inspect
+
+            options = {}
+            if calibration is not None and "rig" in inspect.signature(check_stereo_sequences).parameters:
+                from ..io import load_bouguet_stereo
+
+                options["rig"] = load_bouguet_stereo(calibration["mat"])[0]
+            report = check_stereo_sequences(left, right, **options)
             text, ok = report.summary(), bool(report.ok)
         _TRIAL_LOG.info("%s", text)
     return {"ok": ok, "text": text, **timing}
