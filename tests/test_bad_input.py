@@ -827,3 +827,104 @@ def test_random_bytes_as_picks(tmp_path_factory, data, suffix):
 def test_length_statistics_ddof_checked(ddof):
     with pytest.raises(ValueError, match="ddof must be a whole number >= 0"):
         wp.length_statistics(np.zeros((5, 2, 3)), [(0, 1)], ddof=ddof)
+
+
+# ---------------------------------------------- tracker checkpoints and corrections (issue 13 items 2, 4)
+def _checkpoint_bytes(kind, track_inputs, capsys):
+    if kind == "empty":
+        return b""
+    if kind == "random":
+        return np.random.default_rng(5).bytes(500)
+    if kind == "foreign":
+        import io
+
+        buf = io.BytesIO()
+        np.savez(buf, a=np.arange(3))
+        return buf.getvalue()
+    full = track_inputs["dir"] / "full.npz"  # "truncated": the first half of a real checkpoint
+    assert _cli(capsys, *_track(track_inputs, "--checkpoint", full, out=track_inputs["dir"] / "t0.csv"))[0] == 0
+    data = full.read_bytes()
+    return data[: len(data) // 2]
+
+
+@pytest.mark.parametrize("kind", ["empty", "random", "foreign", "truncated"])
+def test_bad_checkpoint_names_the_file_and_the_way_out(track_inputs, capsys, kind):
+    ck = track_inputs["dir"] / "ck.npz"
+    ck.write_bytes(_checkpoint_bytes(kind, track_inputs, capsys))
+    code, _, err = _cli(capsys, *_track(track_inputs, "--checkpoint", ck))
+    assert code == 1 and track_inputs["out"].read_text() == "old tracks\n"
+    line = _one_line_error(err, ck)
+    assert "delete" in line or "another" in line, line
+
+
+@FEW
+@given(data=st.binary(max_size=300))
+def test_random_bytes_as_checkpoint(tmp_path_factory, data):
+    d = tmp_path_factory.mktemp("ck")
+    ck = d / "ck.npz"
+    ck.write_bytes(data)
+    frames = [np.pad(np.full((5, 5), 200, np.uint8), 20)] * 3
+    with pytest.raises(ValueError) as info:
+        wp.track_markers(frames, pd.DataFrame({"point": [0], "x": [22.0], "y": [22.0]}), checkpoint=ck, progress=False)
+    assert str(ck) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_checkpoint_every_on_the_cli(track_inputs, capsys):
+    ck = track_inputs["dir"] / "ck.npz"
+    code, _, err = _cli(capsys, *_track(track_inputs, "--checkpoint", ck, "--checkpoint-every", "2"))
+    assert code == 0, err
+    with pytest.raises(SystemExit) as info:  # argparse: usage and one error line, exit code 2
+        main([str(a) for a in _track(track_inputs, "--checkpoint", ck, "--checkpoint-every", "0")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "--checkpoint-every" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("data", [
+    b"", b"\x00\x9d\xff binary \x01", b"point,frame\n1\n", b"point,frame,x,y\nnan,0,1,2\n", b"point,frame,x,y\n0,,1,2\n",
+])
+def test_bad_corrections_file_names_the_file(tmp_path, data):
+    p = tmp_path / "corrections.csv"
+    p.write_bytes(data)
+    with pytest.raises(ValueError) as info:
+        wp.load_corrections(p)
+    assert str(p) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_ctrl_c_saves_a_checkpoint_and_the_rerun_matches(track_inputs, capsys, monkeypatch):
+    """Ctrl-C mid-sequence: exit 130 with one line, a checkpoint on disk, and a resumed run equal to a clean one."""
+    import inspect
+
+    import wingphoto.pipeline as pipeline
+
+    real = pipeline.read_sequence
+
+    class Frames:  # Ctrl-C at the tracker's first read of frame 4 (the sequence checks read it before)
+        armed = True
+
+        def __init__(self, seq):
+            self.seq = seq
+
+        def __len__(self):
+            return len(self.seq)
+
+        def __getitem__(self, k):
+            if Frames.armed and isinstance(k, (int, np.integer)) and k == 4 and any(
+                    f.function == "track_markers" for f in inspect.stack(0)):
+                Frames.armed = False
+                raise KeyboardInterrupt
+            return self.seq[k]
+
+        def __getattr__(self, name):
+            return getattr(self.seq, name)
+
+    clean = track_inputs["dir"] / "clean.csv"
+    assert _cli(capsys, *_track(track_inputs, out=clean))[0] == 0
+    monkeypatch.setattr(pipeline, "read_sequence", lambda *a, **k: Frames(real(*a, **k)))
+    ck = track_inputs["dir"] / "ck.npz"
+    code, _, err = _cli(capsys, *_track(track_inputs, "--checkpoint", ck, "--checkpoint-every", "1000"))
+    said = [ln for ln in err.replace("\r", "\n").splitlines() if ln.startswith("wingphoto track")]
+    assert code == 130 and "Traceback" not in err and len(said) == 1 and "interrupted" in said[0], err
+    assert not Frames.armed and ck.is_file() and track_inputs["out"].read_text() == "old tracks\n"
+    monkeypatch.setattr(pipeline, "read_sequence", real)
+    assert _cli(capsys, *_track(track_inputs, "--checkpoint", ck))[0] == 0
+    pd.testing.assert_frame_equal(read_tracks_csv(track_inputs["out"]), read_tracks_csv(clean))
