@@ -257,20 +257,14 @@ def length_statistics(points, pairs, *, condition=None, nominal=None, ddof=1):
 
 def _expected_length_std(points, i, j):
     """RMS over frames of the length sigma predicted by per-point covariances, or None without them."""
+    from .uncertainty import covariance_array
+
     if not isinstance(points, pd.DataFrame):
         return None
-    from .uncertainty import point_covariances
-
-    C, _ = point_covariances(points, part="_track")
-    if C is None:
-        C, _ = point_covariances(points)
-    if C is None:
-        return None
     P, frames, ids = points_to_array(points)
-    fi = pd.Index(frames).get_indexer(points["frame"].to_numpy())
-    pi = pd.Index(ids).get_indexer(points["point"].to_numpy())
-    Cs = np.full((len(frames), len(ids), 3, 3), np.nan)
-    Cs[fi, pi] = C
+    Cs = covariance_array(points, frames, ids)
+    if Cs is None:
+        return None
     a, b = _column(ids, i, "i"), _column(ids, j, "j")
     d = P[:, a] - P[:, b]
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from .analysis import _as_array, _column, _unit, find_reversals, points_to_array
+from .analysis import _as_array, _column, _unit, find_reversals
+from .uncertainty import covariance_array
 
 __all__ = [
     "wing_kinematics",
@@ -270,25 +271,6 @@ def _quantities(out):
             yield name, out[name]
 
 
-def _cov_array(points, frames, ids):
-    """(T, N, 3, 3) point covariances from a points table's cov_* / sigma_* columns, or None."""
-    from .uncertainty import point_covariances
-
-    if not isinstance(points, pd.DataFrame):
-        return None
-    C, _ = point_covariances(points, part="_track")
-    if C is None:
-        C, _ = point_covariances(points)
-    if C is None:
-        return None
-    out = np.full((len(frames), len(ids), 3, 3), np.nan)
-    fi = pd.Index(frames).get_indexer(points["frame"].to_numpy())
-    pi = pd.Index(ids).get_indexer(points["point"].to_numpy())
-    keep = (fi >= 0) & (pi >= 0)
-    out[fi[keep], pi[keep]] = C[keep]
-    return out
-
-
 def _propagate(P, C, lay, base, step=1e-3):
     """First-order sigma of every quantity from the per-point 3D covariances ``C`` (T, N, 3, 3).
 
@@ -450,7 +432,7 @@ def wing_kinematics(points, *, leading_edge, trailing_edge=None, root=None, hing
         C = np.zeros(P.shape + (3,))
         C[..., [0, 1, 2], [0, 1, 2]] = S**2
     elif isinstance(points, pd.DataFrame):
-        C = _cov_array(points, frames, ids)
+        C = covariance_array(points, frames, ids)
     sig = _propagate(P, C, lay, base) if C is not None else {}
     parts = []
     T = len(frames)

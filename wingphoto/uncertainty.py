@@ -57,6 +57,30 @@ COV_NAMES = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
 _COV_INDEX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
+def covariance_array(points, frames, ids):
+    """(T, N, 3, 3) per-point covariances of a points table laid out on its frame x point grid.
+
+    Uses the tracking term (``*_track`` columns) when the table has it, else the total;
+    NaN where a (frame, point) has no row. Returns None when the table carries no
+    uncertainty columns (or is not a DataFrame). Used by the derived quantities (length
+    statistics, kinematic angles), whose calibration term largely cancels between
+    neighbouring markers.
+    """
+    if not isinstance(points, pd.DataFrame):
+        return None
+    C, _ = point_covariances(points, part="_track")
+    if C is None:
+        C, _ = point_covariances(points)
+    if C is None:
+        return None
+    out = np.full((len(frames), len(ids), 3, 3), np.nan)
+    fi = pd.Index(frames).get_indexer(points["frame"].to_numpy())
+    pi = pd.Index(ids).get_indexer(points["point"].to_numpy())
+    keep = (fi >= 0) & (pi >= 0)
+    out[fi[keep], pi[keep]] = C[keep]
+    return out
+
+
 def point_covariances(points, *, part=""):
     """(N, 3, 3) covariance of each row of a points table, from its ``cov_*`` or ``sigma_*`` columns.
 
