@@ -601,15 +601,8 @@ class Picker(ImageView):
 
     def _drag_to(self, press, x, y):
         kind, pick = press["target"][:2]
-        if kind == "move":
-            x0, y0 = press["image"]
-            return self.state.move(self._camera, pick.point, pick.x + x - x0, pick.y + y - y0).select(pick.point)
-        # an edge changes its own half-size only (a corner both): the box never collapses
-        x_edge, y_edge = press["target"][2]
-        x0, y0 = press["image"]
-        half_w = max(pick.half_w + (abs(x - pick.x) - abs(x0 - pick.x)), 1.0) if x_edge else pick.half_w
-        half_h = max(pick.half_h + (abs(y - pick.y) - abs(y0 - pick.y)), 1.0) if y_edge else pick.half_h
-        return self.state.resize(self._camera, pick.point, half_w, half_h).select(pick.point)
+        edges = None if kind == "move" else press["target"][2]
+        return self.state.drag(self._camera, pick.point, press["image"], (x, y), edges=edges).select(pick.point)
 
     def _drag_message(self, press):
         kind, pick = press["target"][:2]

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from ..io import atomic_write
-from ..picks import PICKS_FORMAT, SAME_SPOT_PX, picks_document, read_picks, read_picks_document
+from ..picks import SAME_SPOT_PX, picks_document, read_picks, read_picks_document
 
 __all__ = [
     "Pick",
@@ -505,6 +505,23 @@ class PickerState:
         pick = self._require(camera, point)
         half_w, half_h = self._check_half(half_w, half_h)
         return self._with_pick(camera, pick._replace(half_w=half_w, half_h=half_h))
+
+    def drag(self, camera, point, start, now, *, edges=None):
+        """Drag marker ``point`` from image position ``start`` to ``now`` (px).
+
+        ``edges=None`` moves the marker by the drag. ``edges=(x_edge, y_edge)`` drags its
+        box's edge (or a corner, both True): each grabbed edge changes only its own
+        half-size, by how much farther from the centre the mouse is than where the drag
+        started (never below 1 px), so a box never collapses to a line.
+        """
+        pick = self._require(camera, point)
+        (x0, y0), (x, y) = start, now
+        if edges is None:
+            return self.move(camera, point, pick.x + x - x0, pick.y + y - y0)
+        x_edge, y_edge = edges
+        half_w = max(pick.half_w + abs(x - pick.x) - abs(x0 - pick.x), 1.0) if x_edge else pick.half_w
+        half_h = max(pick.half_h + abs(y - pick.y) - abs(y0 - pick.y), 1.0) if y_edge else pick.half_h
+        return self.resize(camera, point, half_w, half_h)
 
     def delete(self, camera, point):
         """Remove marker ``point`` from ``camera``; it becomes the active number."""

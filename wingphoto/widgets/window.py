@@ -216,12 +216,8 @@ class WindowPicker:
             return
         x0, y0 = p["start"]
         try:
-            if kind == "move":
-                p["preview"] = self.state.move(p["camera"], pick.point, pick.x + x - x0, pick.y + y - y0)
-            else:
-                hw = max(pick.half_w + abs(x - pick.x) - abs(x0 - pick.x), 1.0) if edges[0] else pick.half_w
-                hh = max(pick.half_h + abs(y - pick.y) - abs(y0 - pick.y), 1.0) if edges[1] else pick.half_h
-                p["preview"] = self.state.resize(p["camera"], pick.point, hw, hh)
+            p["preview"] = self.state.drag(p["camera"], pick.point, (x0, y0), (x, y),
+                                           edges=None if kind == "move" else edges)
             p["preview"] = p["preview"].select(pick.point, camera=p["camera"])
         except ValueError as exc:
             self.message = str(exc)
