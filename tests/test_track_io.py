@@ -17,7 +17,7 @@ def seq():
 # --------------------------------------------------------------------------- options
 def test_options_one_place_for_defaults_and_validation():
     o = TrackOptions()
-    assert o.max_sigma == 0.3 and o.search_radius == 20 and o.max_mass_ratio is None
+    assert o.max_sigma == 0.25 and o.search_radius == 20 and o.max_mass_ratio is None
     with pytest.raises(ValueError, match="lost_score .* must not exceed min_score"):
         TrackOptions(min_score=0.2, lost_score=0.5)
     with pytest.raises(ValueError, match="max_coast must be >= 0"):
@@ -33,7 +33,7 @@ def test_keywords_override_options(seq):
     a = track_markers(frames[:6], np.rint(truth[0]), progress=False, options=TrackOptions(max_sigma=1e-6))
     assert (a[a.frame > 0].reason == "imprecise").all()  # every sigma is above 1e-6 px
     b = track_markers(frames[:6], np.rint(truth[0]), progress=False, options=TrackOptions(max_sigma=1e-6),
-                      max_sigma=0.3)
+                      max_sigma=0.25)
     assert (b.status == "ok").all()
     with pytest.raises(TypeError, match="unknown option"):
         track_markers(frames[:3], np.rint(truth[0]), progress=False, min_scroe=0.5)

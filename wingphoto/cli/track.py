@@ -22,7 +22,7 @@ def add_parser(sub):
     t.add_argument("--checkpoint-every", type=_positive_int, default=500, metavar="N",
                    help="frames between two checkpoint saves (default 500)")
     t.add_argument("--max-sigma", type=float, default=None, metavar="PX",
-                   help="largest positional uncertainty (px) of an ok point (default 0.3)")
+                   help="largest positional uncertainty (px) of an ok point (default 0.25)")
     t.add_argument("--force", action="store_true",
                    help="track despite a failed sequence check (duplicated frames, stray files; `wingphoto check`)")
     return t

@@ -61,7 +61,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         known yet, and as the cap of the prediction-driven radius. Must exceed the largest
         motion between frames 0 and 1.
     max_sigma : float, optional
-        Largest ``sigma`` (px) of an ``ok`` point (default 0.3).
+        Largest ``sigma`` (px) of an ``ok`` point (default 0.25).
     polarity : {"auto", 1, -1}, optional
         Bright (1) or dark (-1) markers; "auto" (default) decides per marker.
     options : TrackOptions, optional

@@ -38,7 +38,7 @@ class TrackOptions:
         between frames 0 and 1.
     max_sigma : float
         A point is ``ok`` only if its positional uncertainty ``sigma`` (px, per axis) is at
-        most this (default 0.3 px); above it the point is flagged ``imprecise``.
+        most this (default 0.25 px); above it the point is flagged ``imprecise``.
     polarity : {"auto", 1, -1}
         Bright (1) or dark (-1) markers; "auto" decides per marker from frame 0.
     max_coast : int
@@ -85,7 +85,7 @@ class TrackOptions:
     """
 
     search_radius: int = 20
-    max_sigma: float = 0.3
+    max_sigma: float = 0.25
     polarity: object = "auto"
     max_coast: int = 6
     fb_tolerance: float = 0.5

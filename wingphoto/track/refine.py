@@ -82,6 +82,10 @@ FOREIGN_NOISE = 6.0
 #: The centroid weighs each disk pixel by its background-subtracted value minus this
 #: fraction of the peak (pixels below it get no weight).
 WEIGHT_FRACTION = 0.2
+#: ... and clipped at this multiple of the blob's median value above that cut: a bright
+#: spot on a marker (a specular highlight) then weighs little more than its face (1.0
+#: clipped faded, edge-on smears so hard that a re-acquired marker landed on a neighbour).
+CLIP_LEVEL = 1.2
 
 
 def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
@@ -156,15 +160,15 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         bgres = np.sqrt(np.where(rin, res * res, np.float32(0.0)).sum(1) / rin.sum(1)) / peak
     mass = sig.sum(1)
     if wfrac > 0:
-        # weights: the value above the cut, clipped at the blob's median value above the
-        # cut - a bright spot on the marker (a specular highlight) weighs no more than the
-        # rest of its face: the centre is the shape's (a uniform disc is not clipped)
+        # weights: the value above the cut, clipped at CLIP_LEVEL times the blob's median
+        # value above the cut - a bright spot on the marker (a specular highlight) weighs
+        # little more than the rest of its face: the centre is nearer the shape's
         cut = (wfrac * peak)[:, None]
         above = sig > cut
         level = np.full(n, np.inf, np.float32)
         has = above.any(1)
         if has.any():
-            level[has] = np.nanmedian(np.where(above[has], sig[has], np.nan), axis=1)
+            level[has] = CLIP_LEVEL * np.nanmedian(np.where(above[has], sig[has], np.nan), axis=1)
         wgt = np.maximum(np.minimum(sig, level[:, None]) - cut, np.float32(0.0))
     else:
         wgt = np.maximum(sig, 0)
@@ -341,7 +345,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
     cut = wfrac * peak if wfrac > 0 else 0.0
-    # the clip level: the blob's median value above the cut (see :func:`_centroid_pass`)
+    # the clip level: CLIP_LEVEL times the blob's median value above the cut
     level = np.inf
     if wfrac > 0:
         nl = 0
@@ -351,7 +355,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 rval[nr + nl] = res  # (scratch: the buffer holds the ring, then room)
                 nl += 1
         if nl > 0:
-            level = np.median(rval[nr: nr + nl])
+            level = CLIP_LEVEL * np.median(rval[nr: nr + nl])
     mass = 0.0
     sw = swx = swy = 0.0
     nw = su = sv = suu = svv = 0.0
@@ -733,8 +737,9 @@ def refine_centroids(frame, xy, radius, *, polarity=1, neighbours=None, iteratio
         Re-centre the disk on the pixel nearest the estimate and repeat (default 2).
     threshold : float
         Each pixel is weighted by its background-subtracted value minus ``threshold``
-        times the blob's peak (0: the plain background-subtracted centroid), clipped at the
-        blob's median value above that cut, so that the centre is the blob's shape's (a specular highlight does not pull it). The default (0.2)
+        times the blob's peak (0: the plain background-subtracted centroid), clipped at 1.2
+        times the blob's median value above that cut, so that a specular highlight barely
+        pulls the centre (a specular highlight does not pull it). The default (0.2)
         makes the centre insensitive to what the disk holds besides the blob (a membrane
         edge, glare, the tail of another blob) at the cost of a slight pixel locking on
         blobs with hard edges (< 0.035 px on an unblurred disc, < 0.01 px with the optics'
