@@ -23,7 +23,7 @@ logger = logging.getLogger("wingphoto.track")
 
 #: A frame is checked for being blank or repeated on every _SAMPLE-th pixel of every
 #: _SAMPLE-th row first (cheap), then in full.
-_SAMPLE = 8
+_SAMPLE = 16
 #: a faded blob (peak below _FADED of its frame-0 peak, or score below _WEAK) on a ring this
 #: far from a plane (fraction of its contrast) is imprecise whatever its sigma
 _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
@@ -252,8 +252,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         positions) and the motion model's history moves one frame on, as time did not
         advance. Returns True when the frame was handled."""
         s = frame[:: _SAMPLE, :: _SAMPLE]
-        if not (s.max() > s.min()) or not np.isfinite(s).all():
-            blank = frame_content(frame) == 0 or not np.isfinite(s).all()
+        floating = frame.dtype.kind == "f"
+        if not (s.max() > s.min()) or (floating and not np.isfinite(s).all()):
+            blank = frame_content(frame) == 0 or (floating and not np.isfinite(s).all())
             if blank:
                 res.status[t] = LOST
                 res.reason[t] = _R["blank"]
