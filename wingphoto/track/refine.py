@@ -284,6 +284,62 @@ def _disk_peak(du, dv, dval, nd, pa, pb, pc):
 
 
 @jit
+def _median_inplace(a, lo, n):
+    """Median of ``a[lo:lo + n]`` (n >= 1) by partial selection, reordering that slice in place.
+
+    The same value as ``np.median`` (the middle element, or the mean ``(a + b) / 2`` of
+    the two middle ones) without its copy and without ordering more than needed: a
+    quickselect (Hoare partition around the median of three, as numba's) of the upper
+    middle element, then the largest of the elements left below it."""
+    half = n >> 1
+    k = lo + half
+    left = lo
+    right = lo + n - 1
+    while right > left:
+        mid = (left + right) >> 1
+        # median of three as the pivot, moved to a[right]
+        if a[mid] < a[left]:
+            a[left], a[mid] = a[mid], a[left]
+        if a[right] < a[mid]:
+            a[right], a[mid] = a[mid], a[right]
+        if a[mid] < a[left]:
+            a[left], a[mid] = a[mid], a[left]
+        pivot = a[mid]
+        a[right], a[mid] = a[mid], a[right]
+        # Hoare partition (as numba's np.median: equal values split evenly):
+        # a[left:st] <= pivot <= a[st + 1:right + 1]
+        i = left
+        j = right - 1
+        while True:
+            while i < right and a[i] < pivot:
+                i += 1
+            while j >= left and pivot < a[j]:
+                j -= 1
+            if i >= j:
+                break
+            a[i], a[j] = a[j], a[i]
+            i += 1
+            j -= 1
+        a[i], a[right] = a[right], a[i]
+        st = i
+        if st == k:
+            break
+        if st < k:
+            left = st + 1
+        else:
+            right = st - 1
+    hi = a[k]
+    if n & 1:
+        return hi
+    # even: the other middle value is the largest of a[lo:k] (all <= a[k])
+    lo_v = a[lo]
+    for q in range(lo + 1, k):
+        if a[q] > lo_v:
+            lo_v = a[q]
+    return (lo_v + hi) / 2
+
+
+@jit
 def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl):
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
@@ -355,7 +411,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 rval[nr + nl] = res  # (scratch: the buffer holds the ring, then room)
                 nl += 1
         if nl > 0:
-            level = CLIP_LEVEL * np.median(rval[nr: nr + nl])
+            level = CLIP_LEVEL * _median_inplace(rval, nr, nl)
     mass = 0.0
     sw = swx = swy = 0.0
     nw = su = sv = suu = svv = 0.0
