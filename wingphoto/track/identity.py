@@ -103,7 +103,7 @@ class IdentityStage:
         coasted, or restarted, from landing on a neighbour's or an unpicked marker's blob
         that happens to lie near its extrapolated prediction.
         """
-        okn = np.flatnonzero(ST == OK)
+        okn = (ST == OK).nonzero()[0]
         T = res.x.shape[0]
         bad = []
         good = []
@@ -144,7 +144,7 @@ class IdentityStage:
         n = len(XP)
         lose = np.zeros(n, bool)
         si = sidx[np.isfinite(XP[sidx])]
-        vi = np.flatnonzero(np.isfinite(XP))
+        vi = np.isfinite(XP).nonzero()[0]
         if si.size == 0 or vi.size < 2:
             return lose
         dx = XP[si][:, None] - XP[vi]
@@ -203,7 +203,7 @@ class IdentityStage:
         # a best peak on the rim of an unclipped window: the marker is further than the
         # window reaches -> search once more, twice as wide
         full = (shp[:, 0] == 2 * ri + 1) & (shp[:, 1] == 2 * ri + 1)
-        redo = np.flatnonzero(border & full & (ri < p.search_radius))
+        redo = (border & full & (ri < p.search_radius)).nonzero()[0]
         if redo.size:
             r2 = np.minimum(2 * ri[redo] + 2, p.search_radius)
             m2, o2, s2 = self._match(frame, idx[redo], ci[redo], r2)

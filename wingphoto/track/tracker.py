@@ -299,18 +299,18 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         RS[self.lostflag] = _R["lost_track"]
         lose = np.zeros(n, bool)
         # matching: windowed NCC around the predictions (fast-path markers skip it)
-        sidx = np.flatnonzero(fits & ~F)
+        sidx = (fits & ~F).nonzero()[0]
         if sidx.size:
             self._search(frame, sidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
             lose = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
             XP[lose] = np.nan
             YP[lose] = np.nan
-        fidx = np.flatnonzero(F)
+        fidx = F.nonzero()[0]
         XP[fidx], YP[fidx] = px[fidx], py[fidx]
-        eidx = np.flatnonzero(edge)
+        eidx = edge.nonzero()[0]
         XP[eidx], YP[eidx] = px[eidx], py[eidx]
         # sub-pixel refinement of everything that has a pixel-level position, jointly
-        ridx = np.flatnonzero(np.isfinite(XP))
+        ridx = np.isfinite(XP).nonzero()[0]
         mass = np.full(n, np.nan)
         self._info = info = dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n),
                                  peak=np.full(n, np.nan), valley=np.full(n, np.nan), spread=np.full(n, np.nan),
@@ -343,7 +343,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 changed = (np.isfinite(nb2[:, 0]) != np.isfinite(nb[:, 0])) | (
                     np.hypot(nb2[:, 0] - nb[:, 0], nb2[:, 1] - nb[:, 1]) > 1.5)
                 changed[vidx] = True
-                redo = np.flatnonzero(changed & np.isfinite(XP))
+                redo = (changed & np.isfinite(XP)).nonzero()[0]
                 if redo.size:
                     X[redo], Y[redo], mass[redo] = self._refine_at(frame, redo, XP, YP, nb2)
         ctx.__dict__.update(X=X, Y=Y, S=S, SEC=SEC, XP=XP, YP=YP, ST=ST, RS=RS, lose=lose, mass=mass, info=info,
@@ -450,7 +450,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             cond = rule_conditions(fits, S, SEC, ctx.mass, self.mass0, self.mass_ref, self.score_ref, ctx.resid,
                                    self.resid_rms, ctx.gap, self.nh, info["foreign"], imprecise, ctx.XP, ctx.YP,
                                    prx, pry, ctx.inside, ctx.j2, self.rb, info["valley"], ctx.lose, par)
-            m = np.flatnonzero(fits)
+            m = fits.nonzero()[0]
             ST[m] = OK
             RS[m] = 0
             apply_rules(cond, ST, RS)
@@ -465,14 +465,14 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             ST[amb] = OK
             RS[amb] = 0
             stay &= ST == OK
-            li = np.flatnonzero(ctx.lose)
+            li = ctx.lose.nonzero()[0]
             X[li], Y[li] = prx[li], pry[li]
-            lst = np.flatnonzero(fits & (ST == LOST))
+            lst = (fits & (ST == LOST)).nonzero()[0]
             X[lst] = Y[lst] = np.nan
-            jmp = np.flatnonzero(RS == _R["jump"])
+            jmp = (RS == _R["jump"]).nonzero()[0]
             # (a marker that stayed on its own blob needs no neighbours to vouch for it: a
             # static dot next to the moving wing)
-            chk = np.flatnonzero((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay)
+            chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
                 self._vouch(jmp, chk, X, Y, S, SEC, ST, RS, ctx.resid, res, t)
         eidx = ctx.eidx
@@ -501,7 +501,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         p = self.p
         X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
         rel = (ST == OK) | ((ST == FLAGGED) & (RS == _R["edge"]))
-        soft = np.flatnonzero((ST == FLAGGED) & _IS_SOFT[RS])
+        soft = ((ST == FLAGGED) & _IS_SOFT[RS]).nonzero()[0]
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
         if ctx.glitch or ctx.aged < 0:
@@ -511,7 +511,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                            self.last_upd, np.array([p.update_score, p.refresh_below, p.update_every], np.float64))
         if upd.any():
             lam = p.update_rate
-            for i in np.flatnonzero(upd).tolist():
+            for i in upd.nonzero()[0].tolist():
                 cut = self._cut(frame, X[i], Y[i], self.h[i])
                 self.tplr[i] = (1.0 - lam) * self.tplr[i] + lam * cut
                 self._set_template(i)
