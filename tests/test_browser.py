@@ -13,6 +13,7 @@ Skipped, with the reason, when Chromium, its driver, selenium or JupyterLab is m
 from __future__ import annotations
 
 import json
+import importlib.util
 import os
 import shutil
 import socket
@@ -41,9 +42,9 @@ def _require():
         pytest.skip("no Chromium: install Debian's chromium and chromium-driver (apt-get install chromium "
                     "chromium-driver; .ci/run does) to run the real-browser widget tests")
     for module in ("selenium", "jupyterlab", "ipympl"):
-        try:
-            __import__(module)
-        except ImportError:
+        # find_spec, not import: importing ipympl switches this process's matplotlib backend
+        # to ipympl, and every later test's figure would then need a Jupyter kernel
+        if importlib.util.find_spec(module) is None:
             pytest.skip(f"{module} is not installed: pip install -e '.[test]' to run the real-browser widget tests")
     if not (SAMPLES / "picks.json").is_file():
         pytest.skip("data-samples/flapping is absent")
@@ -150,6 +151,7 @@ class Lab:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
+                self._accept_kernel_dialog()
                 value = condition()
             except Exception:  # noqa: BLE001 - DOM in flux; retry until the deadline
                 value = None
@@ -175,6 +177,17 @@ class Lab:
         self.wait(lambda: self.xpath("//*[contains(@class,'jp-Notebook-ExecutionIndicator') and "
                                      "@data-status='idle']") or self._kernel_idle(), "the kernel to start")
 
+    def _accept_kernel_dialog(self):
+        """Accept JupyterLab's "Select Kernel" dialog (the notebook's own python3 preselected).
+
+        On a busy machine Lab sometimes asks for the kernel although the notebook names it,
+        and the dialog then covers the figure. Every :meth:`wait` calls this first.
+        """
+        for dialog in self.css(".jp-Dialog"):
+            if "Select Kernel" in (dialog.text or ""):
+                for button in dialog.find_elements("css selector", ".jp-Dialog-button.jp-mod-accept"):
+                    button.click()
+
     def _kernel_idle(self):
         return any("Idle" in (e.text or "") or "Idle" in (e.get_attribute("title") or "")
                    for e in self.css(".jp-StatusBar-TextItem, .jp-Toolbar-kernelStatus, .jp-KernelStatus"))
@@ -186,7 +199,22 @@ class Lab:
                   f"menu item {item}")[0].click()
 
     def run_all(self):
-        self.menu("Run", "Run All Cells")
+        """Run every cell, and check that the kernel took the request (a prompt shows [*] or [n]).
+
+        On a busy machine Lab can swallow the first request (a late "Select Kernel" dialog,
+        a kernel still connecting); then the request is made again, up to three times.
+        """
+        for attempt in range(3):
+            self.menu("Run", "Run All Cells")
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                self._accept_kernel_dialog()
+                prompts = [e.text or "" for e in self.css(".jp-Cell .jp-InputPrompt")]
+                if any(any(ch.isdigit() or ch == "*" for ch in p) for p in prompts):
+                    return
+                time.sleep(0.5)
+        self.shot("run_all")
+        raise AssertionError("JupyterLab did not run the cells after three 'Run All Cells' requests")
 
     def status_text(self, marker):
         """Text of the widget HTML that contains ``marker`` (the status line)."""
