@@ -254,7 +254,7 @@ def _rig_vector(rig):
 
 
 def _project_vector(p, XL):
-    from .calibrate import _project
+    from .calibrate.model import _project
 
     xl = _project(p[0:10], XL)
     XR = XL @ rodrigues(p[20:23]).T + p[23:26]

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .calibrate import CornerDetection, _check_pattern_size, find_corners
+from .calibrate import CornerDetection, find_corners
+from .calibrate.checks import _check_pattern_size
 
 __all__ = ["Selection", "select_calibration_frames", "estimate_offset", "motion_signal"]
 

@@ -64,7 +64,7 @@ def plot_corners(image, detection, *, ax=None, cmap="gray"):
     ax : matplotlib Axes
         The corners joined in their order (a line along each row), corner 0 circled.
     """
-    from .calibrate import CornerDetection, _read_gray
+    from .calibrate.corners import CornerDetection, _read_gray
 
     ax = _axes(ax)
     img, _ = _read_gray(image, "image")
