@@ -231,6 +231,7 @@ class _Run:
         self.read = 0  # the highest frame index read so far (the fingerprint samples 0 .. read)
         self.tracker = None
         self.ck = None
+        self.resumed = False
 
     # ------------------------------------------------------------ checkpoint state
     def _prefixes(self):
@@ -263,6 +264,7 @@ class _Run:
         for pre, r in self._prefixes():
             r.load(arrays, pre)
         self.i, self.next, self.read = i, nxt, int(meta.get("read", 0))
+        self.resumed = True
         if i < len(self.passes):
             st = {k[3:]: v for k, v in arrays.items() if k.startswith("st_")}
             try:
@@ -306,7 +308,7 @@ class _Run:
     def run(self, ck, progress, camera):
         """Run (or finish) every pass, saving to the checkpointer ``ck`` (or None)."""
         self.ck = ck
-        todo = self.i < len(self.passes) or self.tracker is None
+        todo = self.i < len(self.passes) or not self.resumed  # a finished checkpoint is not saved again
         while self.i < len(self.passes):
             ps = self.passes[self.i]
             if self.next is None:
