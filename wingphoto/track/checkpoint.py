@@ -11,8 +11,11 @@ wingphoto checkpoint (empty, truncated, foreign).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import signal
+import threading
 import zipfile
 from pathlib import Path
 
@@ -110,6 +113,8 @@ def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
 
     ``ckpt`` (or None) is told of each tracked frame (``ckpt.completed(t)``) and asked to
     save (``ckpt.save()``) when the pass stops on an exception (Ctrl-C, a read error).
+    With ``ckpt``, a Ctrl-C that arrives while a frame is being tracked takes effect when
+    that frame is done (a second Ctrl-C at once): a checkpoint never holds half a frame.
     """
     from tqdm.auto import tqdm
 
@@ -120,13 +125,16 @@ def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
     tracker._prev = fr[first] if 0 <= first < len(fr) else None
     tracker._prev2 = fr[first - direction] if 0 <= first - direction < len(fr) else None
     try:
-        for t in frames_order:
-            tracker.step(fr[t], t, res, direction)
-            done += 1
-            if ckpt is not None:
-                ckpt.completed(t)
-            if done & 255 == 0:
-                bar.update(256)
+        with _whole_frames(ckpt is not None) as interrupted:
+            for t in frames_order:
+                tracker.step(fr[t], t, res, direction)
+                done += 1
+                if ckpt is not None:
+                    ckpt.completed(t)
+                if interrupted:
+                    raise KeyboardInterrupt
+                if done & 255 == 0:
+                    bar.update(256)
     except BaseException:
         if ckpt is not None:
             ckpt.save()
@@ -134,6 +142,29 @@ def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
     finally:
         bar.update(done & 255)
         bar.close()
+
+
+@contextlib.contextmanager
+def _whole_frames(enabled):
+    """Defer a Ctrl-C (SIGINT) to the end of the frame under way; yields the list a deferred
+    one is noted in. Only where Python's own handler is installed, in the main thread (not
+    under a handler of the caller's); a second Ctrl-C raises at once."""
+    pending = []
+    if not (enabled and threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        yield pending
+        return
+
+    def note(signum, frame):
+        if pending:
+            raise KeyboardInterrupt
+        pending.append(signum)
+
+    signal.signal(signal.SIGINT, note)
+    try:
+        yield pending
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 class _Checkpointer:

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import _WAY_OUT, _Checkpointer, _fingerprint, _load_checkpoint, _run_pass
+from .checkpoint import (
+    _WAY_OUT,
+    _Checkpointer,
+    _fingerprint,
+    _load_checkpoint,
+    _run_pass,
+)
 from .inputs import _Frames, _parse_picks
 from .options import TrackOptions
-from .results import _Results, _merge_backward, _tracks_frame
+from .results import _merge_backward, _Results, _tracks_frame
 from .status import _R, FLAGGED, OK
 from .tracker import Tracker as _Tracker
 
@@ -265,7 +271,7 @@ class _Run:
             r.load(arrays, pre)
         self.i, self.next, self.read = i, nxt, int(meta.get("read", 0))
         self.resumed = True
-        if i < len(self.passes):
+        if i < len(self.passes) and (nxt is not None or "st_h" in arrays):
             st = {k[3:]: v for k, v in arrays.items() if k.startswith("st_")}
             try:
                 self.tracker = _Tracker.from_state(st, self.p, self.fr.is_u8, self.fr.shape)
@@ -309,18 +315,23 @@ class _Run:
         """Run (or finish) every pass, saving to the checkpointer ``ck`` (or None)."""
         self.ck = ck
         todo = self.i < len(self.passes) or not self.resumed  # a finished checkpoint is not saved again
-        while self.i < len(self.passes):
-            ps = self.passes[self.i]
-            if self.next is None:
-                self.tracker = self._start(ps)
-                self.next = ps.first
-            out = self.res[ps.group] if ps.kind == "track" else self.ver[ps.group]
-            k = self.ks[ps.group]
-            desc = (f"{'track' if ps.direction > 0 else 'back'} {camera}" + (f" from {k}" if k else "")
-                    + (" (check)" if ps.kind == "verify" else ""))
-            _run_pass(self.fr, self.tracker, out, ps.frames(self.next), ps.direction, self, progress, desc)
-            self.i += 1
-            self.next = None
+        try:
+            while self.i < len(self.passes):
+                ps = self.passes[self.i]
+                if self.next is None:
+                    self.tracker = self._start(ps)
+                    self.next = ps.first
+                out = self.res[ps.group] if ps.kind == "track" else self.ver[ps.group]
+                k = self.ks[ps.group]
+                desc = (f"{'track' if ps.direction > 0 else 'back'} {camera}" + (f" from {k}" if k else "")
+                        + (" (check)" if ps.kind == "verify" else ""))
+                _run_pass(self.fr, self.tracker, out, ps.frames(self.next), ps.direction, self, progress, desc)
+                self.i += 1
+                self.next = None
+        except BaseException:
+            if self.tracker is not None:  # (also stopped between two passes: the state is whole there too)
+                self.save()
+            raise
         if todo:
             self.save()
 
