@@ -77,14 +77,16 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         Any other field of :class:`~wingphoto.track.TrackOptions` by name (``min_score``,
         ``max_coast``, ``search_every`` ...).
     bidirectional : bool
-        Also track backwards from the last frame; flag ``fb_disagree`` where the passes
-        disagree by more than ``fb_tolerance`` px and use the backward position where only
-        it is ok. Doubles the run time.
+        Check each pass by tracking back over it: from the last frame back to the frame the
+        markers were picked in, and (picks in a later frame ``k``) from frame 0 forward to
+        ``k``; flag ``fb_disagree`` where the passes disagree by more than ``fb_tolerance``
+        px and use the checking pass's position where only it is ok (and it agreed further
+        along). Doubles the run time.
     checkpoint : str or Path, optional
         File (``.npz``) holding the state; saved atomically every ``checkpoint_every``
-        frames and when the run stops on an exception. If it exists and was written for
-        the same frames, picks and options, tracking resumes from it with identical
-        results.
+        frames and when the run stops on an exception (a Ctrl-C takes effect at the end of
+        the frame under way). If it exists and was written for the same frames, picks
+        (with their frames) and options, tracking resumes from it with identical results.
     checkpoint_every : int
         Frames between two checkpoint saves (default 500).
     progress : bool
