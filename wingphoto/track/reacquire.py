@@ -27,8 +27,9 @@ class ReacquireStage:
         2. Else from the reference frame (the first frame of the pass, where every marker
            is known) by a robust affine map on its nearest reliable neighbours: a planar
            wing seen from afar moves by an affine map however much time has passed.
-        3. An isolated marker (fewer than two neighbours within ``self.local`` px - the
-           two-marker rigid target, a reference dot) is searched for in a wide window
+        3. An isolated marker (fewer than two other markers within ``self.local`` px in
+           the reference frame, ok now or not - the two-marker rigid target, a reference
+           dot) is searched for in a wide window
            (``search_radius``) at its last position, moved like its one neighbour if it has
            one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
         """
@@ -64,7 +65,12 @@ class ReacquireStage:
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
                     return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
-        # 3. an isolated marker
+        # 3. an isolated marker: fewer than two other markers near it in the reference
+        # frame (not: fewer than two ok now - its neighbours may be lost with it)
+        others = np.flatnonzero(np.isfinite(ref[:, 0]))
+        others = others[others != i]
+        if np.count_nonzero(np.hypot(ref[others, 0] - ref[i, 0], ref[others, 1] - ref[i, 1]) <= self.local) >= 2:
+            return None
         nbr = cand[np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1]) <= self.local]
         if nbr.size >= 2:
             return None
