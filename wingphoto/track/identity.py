@@ -68,11 +68,13 @@ class IdentityStage:
             RS[bad] = _R["jump"]
 
 
-    def _neighbours_then(self, i, ti, Pi, okn, res):
+    def _neighbours_then(self, i, ti, Pi, okn, res, alike_only=False):
         """Up to six neighbours of marker ``i``, nearest first: ok now (``okn``) and on frame
         ``ti``, within ``self.local`` px of its position ``Pi`` then, and - when two or
         more did - those that moved like it then (not the static mount and reference dots
-        for a wing marker). Returns their indices and positions on frame ``ti``."""
+        for a wing marker). With ``alike_only``, only those that moved like it, however few
+        (when its motion then is known): a wing marker is not predicted from static dots. Returns
+        their indices and positions on frame ``ti``."""
         T = res.x.shape[0]
         cand = okn[(okn != i) & (res.status[ti, okn] == OK)]
         prev = np.column_stack([res.x[ti, cand], res.y[ti, cand]])
@@ -86,7 +88,7 @@ class IdentityStage:
             if 0 <= tb < T:
                 vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
                 same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
-                if same.sum() >= 2:
+                if same.sum() >= 2 or alike_only:
                     cand, prev, d = cand[same], prev[same], d[same]
         o = np.argsort(d)[:6]
         return cand[o], prev[o]

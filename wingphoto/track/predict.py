@@ -7,7 +7,7 @@ from . import engine
 from .engine import jit
 from .geometry import _nearest_kernel, _nearest_two
 
-__all__ = ["predict_positions", "start_frame", "update_model"]
+__all__ = ["predict_positions", "shift_history", "start_frame", "update_model"]
 
 
 def predict_positions(hx, ht, nh, t):
@@ -51,6 +51,59 @@ def predict_positions(hx, ht, nh, t):
     h1 = np.where(order[:, None] >= 2, hx[:, 1], 0.0)
     h2 = np.where(order[:, None] >= 3, hx[:, 2], 0.0)
     return c0[:, None] * hx[:, 0] + c1[:, None] * h1 + c2[:, None] * h2
+
+
+def shift_history(hx, ht, nh, dt):
+    """Move each marker's reliable history ``dt`` frames along its own motion.
+
+    Parameters
+    ----------
+    hx : (N, 3, 2) ndarray
+        The last three reliable positions (x, y) px, newest first (NaN where absent).
+    ht : (N, 3) ndarray of int
+        Their frames.
+    nh : (N,) ndarray of int
+        How many of them are known (1-3).
+    dt : int
+        Frames to move by (frame numbers: negative for a backward pass).
+
+    Returns
+    -------
+    (N, 3, 2) ndarray
+        Position ``k`` replaced by the history's own polynomial (quadratic through three
+        points, linear through two, constant) at frame ``ht[:, k] + dt``; the frames
+        ``ht`` are kept.
+
+    Notes
+    -----
+    Used when frames were dropped (or one repeated): predicting frame ``t`` from the
+    shifted history is the full-order extrapolation of the original history to frame
+    ``t + dt``, the gaps stay as they were (the search windows and the motion model's
+    limits do not widen for the frames that never reached the tracker), and the
+    following frames continue from it.
+    """
+    out = hx.copy()
+    if dt == 0:
+        return out
+    a = ht.astype(float)
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(3):
+            tq = a[:, k] + dt
+            q0 = (tq - a1) * (tq - a2) / ((a0 - a1) * (a0 - a2))
+            q1 = (tq - a0) * (tq - a2) / ((a1 - a0) * (a1 - a2))
+            q2 = (tq - a0) * (tq - a1) / ((a2 - a0) * (a2 - a1))
+            l0 = (tq - a1) / (a0 - a1)
+            l1 = (tq - a0) / (a1 - a0)
+            c0 = np.where(nh == 3, q0, np.where(nh == 2, l0, 1.0))
+            c1 = np.where(nh == 3, q1, np.where(nh == 2, l1, 0.0))
+            c2 = np.where(nh == 3, q2, 0.0)
+            h1 = np.where(nh[:, None] >= 2, hx[:, 1], 0.0)
+            h2 = np.where(nh[:, None] >= 3, hx[:, 2], 0.0)
+            v = c0[:, None] * hx[:, 0] + c1[:, None] * h1 + c2[:, None] * h2
+            known = (k < nh)
+            out[known, k] = v[known]
+    return out
 
 
 def _pre_numpy(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,

@@ -19,16 +19,18 @@ class ReacquireStage:
 
         Returns (prediction, search radius, minimum score, neighbours used) or None.
 
-        1. From its last reliable frame: the neighbours reliable then and now (those that
-           moved like it then, when there are enough) map its last position to now
+        1. From its last reliable frame: the neighbours reliable then and now that moved
+           like it then (when its motion then is known) map its last position to now
            (:func:`_neighbour_prediction`: a robust affine map or the mean displacement of
            a group that moved alike). Short intervals keep this accurate on a bending,
            pitching wing.
         2. Else from the reference frame (the first frame of the pass, where every marker
-           is known) by a robust affine map on its nearest reliable neighbours: a planar
+           is known) by a robust affine map on its nearest reliable neighbours of its kind
+           (moving ones for a marker that moved, still ones for one that did not): a planar
            wing seen from afar moves by an affine map however much time has passed.
-        3. An isolated marker (fewer than two neighbours within ``self.local`` px - the
-           two-marker rigid target, a reference dot) is searched for in a wide window
+        3. An isolated marker (fewer than two other markers within ``self.local`` px in
+           the reference frame, ok now or not - the two-marker rigid target, a reference
+           dot) is searched for in a wide window
            (``search_radius``) at its last position, moved like its one neighbour if it has
            one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
         """
@@ -39,7 +41,7 @@ class ReacquireStage:
         Pi = self.hist_x[i, 0]
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
-            c1, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            c1, prev = self._neighbours_then(i, ti, Pi, okn, res, alike_only=True)
             if c1.size >= 2:
                 pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
@@ -51,9 +53,11 @@ class ReacquireStage:
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
                 still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
-                group = still if v < 0.3 else ~still
-                if group.sum() >= 4:
-                    use = group
+                # (still: slow when last seen and still where it was in the reference frame -
+                # a wing marker lost at stroke reversal is slow too)
+                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < 1.5 else ~still
+                # (a moving marker is not mapped by static dots, nor a static one by the wing)
+                use = group
             cidx = np.flatnonzero(use)
             d = np.hypot(ref[okn[cidx], 0] - ref[i, 0], ref[okn[cidx], 1] - ref[i, 1])
             order = cidx[np.argsort(d)]
@@ -64,7 +68,12 @@ class ReacquireStage:
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
                     return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
-        # 3. an isolated marker
+        # 3. an isolated marker: fewer than two other markers near it in the reference
+        # frame (not: fewer than two ok now - its neighbours may be lost with it)
+        others = np.flatnonzero(np.isfinite(ref[:, 0]))
+        others = others[others != i]
+        if np.count_nonzero(np.hypot(ref[others, 0] - ref[i, 0], ref[others, 1] - ref[i, 1]) <= self.local) >= 2:
+            return None
         nbr = cand[np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1]) <= self.local]
         if nbr.size >= 2:
             return None

@@ -12,7 +12,7 @@ from . import engine
 from .geometry import _nearest_two
 from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
-from .predict import start_frame, update_model
+from .predict import shift_history, start_frame, update_model
 from .reacquire import ReacquireStage
 from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _contrast, _refine, _refine_all_kernel
 from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
@@ -32,6 +32,9 @@ _SIGMA_FLOOR, _SIGMA_NOISE, _SIGMA_BACKGROUND, _SIGMA_MATCH, _SIGMA_SHAPE = 0.00
 #: The constellation is broken when fewer than this share of the markers with a velocity
 #: are found where predicted.
 _CONSTELLATION = 0.5
+#: Dropped-frame hypotheses tried (1 to _MAX_DROPPED frames), and the extra distance (px
+#: per frame dropped) a marker may lie from a prediction extrapolated over them.
+_MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
 
 
@@ -354,16 +357,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         return ctx
 
     # ------------------------------------------------------------ constellation
-    def _consistent(self, ctx):
+    def _consistent(self, ctx, extra=0.0):
         """(number of checkable markers, number of them found where predicted).
 
         Checkable: matched markers with a velocity (two or more reliable points, at most
         one frame coasted); found where predicted: residual within the motion model's
-        limit (``max(2 px, 4 rms + 2 (gap - 1))``) and a score of at least ``min_score``.
+        limit (``max(2 px, 4 rms + 2 (gap - 1))``, plus ``extra`` px) and a score of at
+        least ``min_score``.
         """
-        gap = ctx.gap - ctx.aged  # frames coasted (not counting the frames a hypothesis dropped)
+        gap = ctx.gap
         chk = ctx.fits & (self.nh >= 2) & (gap <= 2)
-        lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (gap - 1))
+        lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (gap - 1)) + extra
         with np.errstate(invalid="ignore"):
             good = chk & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
         return int(chk.sum()), int(good.sum())
@@ -376,16 +380,19 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
     def _recover(self, frame, t, direction, ctx):
         """Explain a broken constellation by a glitch, or flag the frame.
 
-        Hypotheses, each tried by solving the frame again: one to three frames dropped (the
-        history is that many frames older), a frame repeated with new noise (one newer),
-        and a camera bump - the global shift between the previous and this frame
-        (:func:`wingphoto.motion.estimate_shift`) added to the history. The hypothesis that
-        puts the most markers where predicted wins if it puts most of them there, and is
-        kept for the next frames; without one, every point of the frame is flagged
-        ``constellation`` and the motion model coasts over it.
+        Hypotheses, each tried by solving the frame again: 1 to ``_MAX_DROPPED`` frames
+        dropped (each marker's history moved that many frames along its own quadratic,
+        :func:`~.predict.shift_history`), a frame repeated with new noise (one back), and
+        a camera bump - the global shift between the previous and this frame
+        (:func:`wingphoto.motion.estimate_shift`) added to the history. A dropped-frames
+        hypothesis extrapolates further, so its markers may be ``_DROP_TOL`` px per frame
+        dropped further from their predictions. The hypothesis that puts the most
+        markers where predicted (ties: the smaller median residual) wins if it puts most
+        of them there, and is kept for the next frames; without one, every point of the
+        frame is flagged ``constellation`` and the motion model coasts over it.
         """
         saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy())
-        hyps = [(1, 0.0, 0.0), (2, 0.0, 0.0), (3, 0.0, 0.0), (-1, 0.0, 0.0)]
+        hyps = [(dt, 0.0, 0.0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0)]
         prev, prev2 = self._prev, self._prev2
         if prev is not None and prev.shape == frame.shape:
             # the image's global shift holds the camera's jump and the wing's own motion:
@@ -398,14 +405,18 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                         hyps.append((0, sh.dx - s0.dx, sh.dy - s0.dy))
                 if math.hypot(sh.dx, sh.dy) > 1.0:
                     hyps.append((0, sh.dx, sh.dy))
-        best, best_good = None, self._consistent(ctx)[1]
+        best, best_key = None, (self._consistent(ctx)[1], -np.inf)
         for dt, dx, dy in hyps:
             self._set_model(saved, dt, dx, dy, direction)
             c = self._solve(frame, t)
-            n, good = self._consistent(c)
-            logger.debug("frame %d: hypothesis %s: %d of %d markers where predicted", t, (dt, dx, dy), good, n)
-            if n >= 3 and good >= _CONSTELLATION * n and good > best_good:
-                best, best_good = (dt, dx, dy), good
+            n, good = self._consistent(c, _DROP_TOL * abs(dt))
+            with np.errstate(invalid="ignore"):
+                r = c.resid[c.fits & (self.nh >= 2)]
+            med = float(np.median(r[np.isfinite(r)])) if np.isfinite(r).any() else np.inf
+            logger.debug("frame %d: hypothesis %s: %d of %d markers where predicted (median residual %.2f px)",
+                         t, (dt, dx, dy), good, n, med)
+            if n >= 3 and good >= _CONSTELLATION * n and (good, -med) > best_key:
+                best, best_key = (dt, dx, dy), (good, -med)
         if best is None:
             self._set_model(saved, 0, 0.0, 0.0, direction)
             ctx = self._solve(frame, t)
@@ -419,15 +430,14 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         return self._solve(frame, t)
 
     def _set_model(self, saved, dt, dx, dy, direction):
-        """Restore the motion model from ``saved``, then age its history by ``dt`` frames
-        and shift its positions by (dx, dy) px."""
+        """Restore the motion model from ``saved``, then move its history ``dt`` frames
+        along each marker's motion (:func:`~.predict.shift_history`) and shift its
+        positions by (dx, dy) px."""
         hx, ht, lf = saved
         self._aged = dt
-        self.hist_x[...] = hx
+        self.hist_x[...] = shift_history(hx, ht, self.nh, dt * direction) if dt else hx
         self.hist_t[...] = ht
         self.lostflag[...] = lf
-        if dt:
-            self.hist_t -= dt * direction
         if dx or dy:
             self.hist_x[..., 0] += dx
             self.hist_x[..., 1] += dy
