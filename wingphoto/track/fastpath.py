@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from . import engine
-from .match import _climb_kernel, _score_kernel
+from .match import _analyse_kernel, _climb_kernel, _ncc_kernel, _score_kernel
 from .predict import _history_kernel, _pre_kernel
 from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine_all_kernel
 from .status import _IS_SOFT, _R, _RULE_REASON, _RULE_STATUS, FLAGGED, LOST, N_RULES, OK, _conditions_kernel
@@ -124,52 +124,109 @@ def _build(key):
                     search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded)
         prx = pred[:, 0]
         pry = pred[:, 1]
-        ns = 0
+        ns = 0  # markers searched: hill-climbed (radius <= 3) or in a full window
+        nw = 0
+        rmax = 0
         for i in range(n):
             if lostflag[i]:
                 return 2  # (_pre_kernel's mark is the one Python's step makes again)
             if not fits[i] or wide[i]:
                 return 3
             if not F[i]:
-                if r[i] > 3:
-                    return 4  # a full windowed search (Identity._search)
                 ns += 1
-        # ---- matching: hill-climb the searched markers (Identity._search, numba branch)
+                if r[i] > 3:
+                    nw += 1
+                    rmax = max(rmax, r[i])
+        if rmax > 6:
+            return 4  # a window that OpenCV matches (Templates._match)
+        # ---- matching (Identity._search, numba branch): hill-climb from the prediction
+        # where the window is small, correlate the whole window elsewhere
         XP = np.full(n, np.nan)
         YP = np.full(n, np.nan)
         S = np.full(n, np.nan)
         SEC = np.full(n, -2.0)
-        if ns:
-            cidx = np.empty(ns, np.int64)
+        sidx = np.empty(ns, np.int64)
+        k = 0
+        for i in range(n):
+            if not F[i]:
+                sidx[k] = i
+                k += 1
+        nc = ns - nw
+        if nc:
+            cidx = np.empty(nc, np.int64)
             k = 0
-            for i in range(n):
-                if not F[i]:
+            for i in sidx:
+                if r[i] <= 3:
                     cidx[k] = i
                     k += 1
-            ch = np.empty(ns, np.int64)
-            cx = np.empty(ns, np.int64)
-            cy = np.empty(ns, np.int64)
-            cr = np.empty(ns, np.int64)
-            for k in range(ns):
+            ch = np.empty(nc, np.int64)
+            cx = np.empty(nc, np.int64)
+            cy = np.empty(nc, np.int64)
+            cr = np.empty(nc, np.int64)
+            for k in range(nc):
                 i = cidx[k]
                 ch[k] = h[i]
                 cx[k] = np.int64(np.rint(prx[i]))
                 cy[k] = np.int64(np.rint(pry[i]))
                 cr[k] = r[i]
-            out = np.empty((ns, 4))
+            out = np.empty((nc, 4))
             _climb_kernel(frame, tz, cidx, ch, cx, cy, cr, out)
-            for k in range(ns):
+            for k in range(nc):
                 if out[k, 3] > 0 or not out[k, 2] > -2.0:
-                    return 4  # the climb reached its window's rim: a full search
+                    return 4  # the climb reached its window's rim: a wider search
                 i = cidx[k]
                 XP[i] = out[k, 0]
                 YP[i] = out[k, 1]
                 S[i] = out[k, 2]
+        if nw:
+            widx = np.empty(nw, np.int64)
+            k = 0
+            for i in sidx:
+                if r[i] > 3:
+                    widx[k] = i
+                    k += 1
+            m = 2 * rmax + 1
+            maps = np.full((nw, m, m), -2.0, np.float32)
+            origin = np.zeros((nw, 2), np.int64)
+            shape = np.zeros((nw, 2), np.int64)
+            wh = np.empty(nw, np.int64)
+            wx = np.empty(nw, np.int64)
+            wy = np.empty(nw, np.int64)
+            wr = np.empty(nw, np.int64)
+            for k in range(nw):
+                i = widx[k]
+                wh[k] = h[i]
+                wx[k] = np.int64(np.rint(prx[i]))
+                wy[k] = np.int64(np.rint(pry[i]))
+                wr[k] = r[i]
+            _ncc_kernel(frame, tz, widx, wh, wx, wy, wr, maps, origin, shape)
+            oth = np.full((nw, 2, 2), np.nan)  # the neighbours' predictions (map cells)
+            excl = np.empty(nw)
+            for k in range(nw):
+                i = widx[k]
+                excl[k] = max(2.0, rb[i])
+                for q in range(2):
+                    j = j2[i, q]
+                    if j >= 0:
+                        oth[k, q, 0] = pred[j, 0] - origin[k, 0]
+                        oth[k, q, 1] = pred[j, 1] - origin[k, 1]
+            peaks = np.empty((nw, 5))
+            _analyse_kernel(maps, shape, excl, oth, peaks)
+            for k in range(nw):
+                i = widx[k]
+                full = shape[k, 0] == 2 * wr[k] + 1 and shape[k, 1] == 2 * wr[k] + 1
+                if peaks[k, 4] > 0 and full and wr[k] < search_radius:
+                    return 4  # best peak on the window's rim: a search twice as wide
+                XP[i] = np.float64(origin[k, 0] + np.int64(peaks[k, 0]))
+                YP[i] = np.float64(origin[k, 1] + np.int64(peaks[k, 1]))
+                S[i] = peaks[k, 2]
+                SEC[i] = peaks[k, 3]
+        if ns:
             # conflicts among the searched markers (Identity._conflicts)
             for a in range(ns):
-                i = cidx[a]
+                i = sidx[a]
                 for b in range(ns):
-                    j = cidx[b]
+                    j = sidx[b]
                     if i == j:
                         continue
                     dx = XP[i] - XP[j]
