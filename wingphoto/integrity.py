@@ -32,6 +32,7 @@ from .motion import _prepared, frame_content, static_background
 
 __all__ = [
     "SequenceReport",
+    "SequenceScan",
     "SequenceWarning",
     "StereoSequenceReport",
     "check_sequence",
@@ -233,85 +234,168 @@ def check_sequence(frames, *, duplicate_tolerance=0.0, blank_fraction=0.1, jump_
     """
     from tqdm.auto import tqdm
 
-    seq = _open(frames, "frames")
-    n = len(seq)
-    if n == 0:
-        raise ValueError("frames holds no frames")
-    first = np.asarray(seq[0])
-    shape = tuple(int(s) for s in first.shape)
-    bg = static_background(seq, max_size=max_size)
-    scale = bg.scale
-    digests, content, energy, offsets, responses = [], np.zeros(n), np.zeros(n), np.full((n, 2), np.nan), np.zeros(n)
-    duplicates = []
-    prev_small, prev_frame = None, None
-    for t in tqdm(range(n), disable=not progress, desc="checking frames"):
-        frame = np.asarray(seq[t])
-        if frame.shape != shape:
-            raise ValueError(f"frame {t} has shape {frame.shape} but frame 0 has {shape}; all frames must have one size")
+    scan = SequenceScan(frames, duplicate_tolerance=duplicate_tolerance, blank_fraction=blank_fraction,
+                        jump_threshold=jump_threshold, max_size=max_size)
+    for t in tqdm(range(scan.n_frames), disable=not progress, desc="checking frames"):
+        scan.add(t, scan.seq[t])
+    return scan.report()
+
+
+class SequenceScan:
+    """The checks of :func:`check_sequence`, fed one frame at a time, in order.
+
+    What lets a caller that reads every frame anyway (the tracker, through
+    :func:`wingphoto.pipeline.track_folder`) check the sequence on the same reads:
+    :meth:`add` each frame as it streams by (:meth:`watch` wraps a sequence so that its
+    reads do it), then :meth:`report` (which reads the frames not added, if any).
+    Opening the scan reads up to 31 spread frames for the static background
+    (:func:`wingphoto.motion.static_background`).
+
+    Parameters
+    ----------
+    frames : str, Path, list of paths, Sequence or (T, H, W) array
+        As for :func:`check_sequence`.
+    duplicate_tolerance, blank_fraction, jump_threshold, max_size
+        As for :func:`check_sequence`.
+
+    Attributes
+    ----------
+    seq : sequence
+        The opened frames.
+    n_frames : int
+    next : int
+        The frame :meth:`add` expects next.
+    duplicates : list of int
+        The duplicated frames found so far (a caller may stop at the first).
+    """
+
+    def __init__(self, frames, *, duplicate_tolerance=0.0, blank_fraction=0.1, jump_threshold=2.0, max_size=256):
+        self.seq = seq = _open(frames, "frames")
+        self.n_frames = n = len(seq)
+        if n == 0:
+            raise ValueError("frames holds no frames")
+        first = np.asarray(seq[0])
+        self.shape = tuple(int(s) for s in first.shape)
+        self.dtype = str(first.dtype)
+        self.duplicate_tolerance, self.blank_fraction = duplicate_tolerance, blank_fraction
+        self.jump_threshold = jump_threshold
+        self.bg = static_background(seq, max_size=max_size)
+        self.content, self.energy, self.responses = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.offsets = np.full((n, 2), np.nan)
+        self.duplicates = []
+        self.next = 0
+        self.source = getattr(getattr(seq, "_store", None), "description", "") or ""
+        self._digest = self._small = self._frame = None
+
+    def add(self, t, frame):
+        """Check frame ``t`` (the next one: :attr:`next`) against the one before it."""
+        if t != self.next:
+            raise ValueError(f"SequenceScan.add: frame {t} given, frame {self.next} expected (frames go in order)")
+        frame = np.asarray(frame)
+        if frame.shape != self.shape:
+            raise ValueError(f"frame {t} has shape {frame.shape} but frame 0 has {self.shape}; "
+                             "all frames must have one size")
         digest = hashlib.blake2b(np.ascontiguousarray(frame).tobytes(), digest_size=16).digest()
         if t:
-            if digest == digests[-1]:
-                duplicates.append(t)
-            elif duplicate_tolerance > 0:
-                mad = float(np.mean(np.abs(frame.astype(np.float64) - prev_frame)))
-                if mad <= duplicate_tolerance:
-                    duplicates.append(t)
-        digests.append(digest)
-        content[t] = frame_content(frame)
-        small = _prepared(frame, scale)
-        if prev_small is not None:
-            energy[t] = float(np.mean(np.abs(small - prev_small)))
-        prev_small = small
-        if duplicate_tolerance > 0:
-            prev_frame = frame.astype(np.float64)
-        shift = bg.offset(frame)
-        offsets[t] = (shift.dx, shift.dy)
-        responses[t] = shift.response
-    median_content = float(np.median(content))
-    blank = np.flatnonzero((content == 0) | (content < blank_fraction * median_content))
-    # a step of the static content between consecutive frames; blank frames carry no offset
-    valid = np.ones(n, bool)
-    valid[blank] = False
-    # the static background must explain the frames for its offsets to mean anything: real
-    # scenes give phase-correlation responses of 0.6-0.75 (flapping samples and scenarios),
-    # frames of unrelated noise 0.15 (median)
-    typical = float(np.median(responses[valid])) if valid.any() else 0.0
-    measurable = typical >= 0.3
-    valid &= measurable & (responses >= 0.5 * typical)
-    rows = []
-    last = None
-    for t in range(n):
-        if not valid[t] or not np.all(np.isfinite(offsets[t])):
-            continue
-        if last is not None:
-            d = offsets[t] - offsets[last]
-            if np.hypot(*d) > jump_threshold:
-                rows.append((t, float(d[0]), float(d[1]), float(responses[t])))
-        last = t
-    jumps = pd.DataFrame(rows, columns=list(_JUMP_COLUMNS)).astype(
-        {"frame": "int64", "dx": "float64", "dy": "float64", "response": "float64"})
-    numbers = getattr(seq, "frame_numbers", None)
-    numbers = np.arange(n, dtype=np.int64) if numbers is None else np.asarray(numbers, dtype=np.int64)
-    strays = list(getattr(seq, "strays", []))
-    gaps = list(getattr(seq, "gaps", []))
-    timestamps = getattr(seq, "timestamps", None)
-    fps = getattr(seq, "fps", None)
-    if not gaps and numbers.size > 2 and getattr(seq, "paths", None) is not None and len(seq.paths) == 1:
-        d = np.diff(numbers)
-        if np.all(d >= 1) and np.any(d > 1):  # image numbers of one recording are consecutive
-            gaps = [int(v) for v in np.setdiff1d(np.arange(numbers[0], numbers[-1] + 1), numbers)]
-    if not gaps and not getattr(seq, "variable_frame_rate", False):
-        gaps = _time_gaps(timestamps, fps)
-    source = getattr(getattr(seq, "_store", None), "description", "") or ""
-    return SequenceReport(
-        n_frames=n, shape=shape, dtype=str(first.dtype), fps=fps, frame_numbers=numbers,
-        timestamps=None if timestamps is None else np.asarray(timestamps, float),
-        duplicates=np.asarray(duplicates, dtype=np.int64), blank=blank.astype(np.int64), jumps=jumps,
-        gaps=gaps, strays=strays, camera_offset=offsets, motion_energy=energy, content=content,
-        source=source, variable_frame_rate=bool(getattr(seq, "variable_frame_rate", False)),
-        camera_numbers=getattr(seq, "info", {}).get("format") in ("cine", "mraw"),
-        motion_measurable=measurable,
-    )
+            if digest == self._digest:
+                self.duplicates.append(t)
+            elif self.duplicate_tolerance > 0:
+                mad = float(np.mean(np.abs(frame.astype(np.float64) - self._frame)))
+                if mad <= self.duplicate_tolerance:
+                    self.duplicates.append(t)
+        self._digest = digest
+        self.content[t] = frame_content(frame)
+        small = _prepared(frame, self.bg.scale)
+        if self._small is not None:
+            self.energy[t] = float(np.mean(np.abs(small - self._small)))
+        self._small = small
+        if self.duplicate_tolerance > 0:
+            self._frame = frame.astype(np.float64)
+        shift = self.bg.offset(frame)
+        self.offsets[t] = (shift.dx, shift.dy)
+        self.responses[t] = shift.response
+        self.next = t + 1
+
+    def watch(self, frames=None, *, on_duplicate=None):
+        """``frames`` (default: :attr:`seq`) as a sequence whose in-order reads are :meth:`add`-ed.
+
+        ``on_duplicate(t)``, if given, is called when frame ``t`` is found to duplicate the
+        one before it (it may raise to stop the reader)."""
+        return _Watched(self.seq if frames is None else frames, self, on_duplicate)
+
+    def report(self):
+        """The :class:`SequenceReport`, once the frames not added yet are read and added."""
+        seq, n = self.seq, self.n_frames
+        for t in range(self.next, n):
+            self.add(t, seq[t])
+        content, offsets, responses = self.content, self.offsets, self.responses
+        median_content = float(np.median(content))
+        blank = np.flatnonzero((content == 0) | (content < self.blank_fraction * median_content))
+        # a step of the static content between consecutive frames; blank frames carry no offset
+        valid = np.ones(n, bool)
+        valid[blank] = False
+        # the static background must explain the frames for its offsets to mean anything: real
+        # scenes give phase-correlation responses of 0.6-0.75 (flapping samples and scenarios),
+        # frames of unrelated noise 0.15 (median)
+        typical = float(np.median(responses[valid])) if valid.any() else 0.0
+        measurable = typical >= 0.3
+        valid &= measurable & (responses >= 0.5 * typical)
+        rows = []
+        last = None
+        for t in range(n):
+            if not valid[t] or not np.all(np.isfinite(offsets[t])):
+                continue
+            if last is not None:
+                d = offsets[t] - offsets[last]
+                if np.hypot(*d) > self.jump_threshold:
+                    rows.append((t, float(d[0]), float(d[1]), float(responses[t])))
+            last = t
+        jumps = pd.DataFrame(rows, columns=list(_JUMP_COLUMNS)).astype(
+            {"frame": "int64", "dx": "float64", "dy": "float64", "response": "float64"})
+        numbers = getattr(seq, "frame_numbers", None)
+        numbers = np.arange(n, dtype=np.int64) if numbers is None else np.asarray(numbers, dtype=np.int64)
+        strays = list(getattr(seq, "strays", []))
+        gaps = list(getattr(seq, "gaps", []))
+        timestamps = getattr(seq, "timestamps", None)
+        fps = getattr(seq, "fps", None)
+        if not gaps and numbers.size > 2 and getattr(seq, "paths", None) is not None and len(seq.paths) == 1:
+            d = np.diff(numbers)
+            if np.all(d >= 1) and np.any(d > 1):  # image numbers of one recording are consecutive
+                gaps = [int(v) for v in np.setdiff1d(np.arange(numbers[0], numbers[-1] + 1), numbers)]
+        if not gaps and not getattr(seq, "variable_frame_rate", False):
+            gaps = _time_gaps(timestamps, fps)
+        source = self.source
+        return SequenceReport(
+            n_frames=n, shape=self.shape, dtype=self.dtype, fps=fps, frame_numbers=numbers,
+            timestamps=None if timestamps is None else np.asarray(timestamps, float),
+            duplicates=np.asarray(self.duplicates, dtype=np.int64), blank=blank.astype(np.int64), jumps=jumps,
+            gaps=gaps, strays=strays, camera_offset=offsets, motion_energy=self.energy, content=content,
+            source=source, variable_frame_rate=bool(getattr(seq, "variable_frame_rate", False)),
+            camera_numbers=getattr(seq, "info", {}).get("format") in ("cine", "mraw"),
+            motion_measurable=measurable,
+        )
+
+
+class _Watched:
+    """A sequence whose reads of frame :attr:`SequenceScan.next` feed the scan (any other
+    read - a frame again, out of order - passes through)."""
+
+    def __init__(self, frames, scan, on_duplicate=None):
+        self.frames, self.scan, self.on_duplicate = frames, scan, on_duplicate
+
+    def __len__(self):
+        return len(self.frames)
+
+    def __getattr__(self, name):  # paths, strays, fps ... of the sequence
+        return getattr(self.frames, name)
+
+    def __getitem__(self, i):
+        frame = self.frames[i]
+        if isinstance(i, (int, np.integer)) and 0 <= i == self.scan.next:
+            self.scan.add(int(i), frame)
+            if self.on_duplicate is not None and self.scan.duplicates[-1:] == [int(i)]:
+                self.on_duplicate(int(i))
+        return frame
 
 
 @dataclasses.dataclass(frozen=True)
@@ -446,7 +530,7 @@ def _epipolar_offset(left, right, rig, max_lag, n_frames=20):
     return -lag, share[lag], (max(others) if others else float("nan"))
 
 
-def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_score=0.2, **options):
+def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_score=0.2, reports=None, **options):
     """Check a left/right pair of sequences for everything that breaks stereo.
 
     Parameters
@@ -461,6 +545,10 @@ def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_sc
     min_offset_score : float, optional
         Smallest correlation of the motion signals for the offset estimate to count
         (default 0.2); below it ``offset`` is None.
+    reports : (SequenceReport, SequenceReport), optional
+        The views' reports, already made from these frames (e.g. by a
+        :class:`SequenceScan` fed while tracking): they are not checked again, and only
+        the frames of the epipolar check (with ``rig``) are read.
     **options
         Passed to :func:`check_sequence` for both views.
 
@@ -491,8 +579,11 @@ def check_stereo_sequences(left, right, *, rig=None, max_offset=5, min_offset_sc
         left = _open(left, "left")
     if not isinstance(right, SequenceReport):
         right = _open(right, "right")
-    lrep = left if isinstance(left, SequenceReport) else check_sequence(left, **options)
-    rrep = right if isinstance(right, SequenceReport) else check_sequence(right, **options)
+    if reports is not None:
+        lrep, rrep = reports
+    else:
+        lrep = left if isinstance(left, SequenceReport) else check_sequence(left, **options)
+        rrep = right if isinstance(right, SequenceReport) else check_sequence(right, **options)
     problems, notes = [], []
     if lrep.n_frames != rrep.n_frames:
         problems.append(f"frame counts differ: left {lrep.n_frames}, right {rrep.n_frames}")

@@ -107,27 +107,47 @@ def load_picks(path, camera):
     return _load_picks(path, camera)
 
 
-def _checked(frames, name, *, force):
-    """Open ``frames`` and run :func:`wingphoto.check_sequence`; stop on wrong frames unless forced."""
-    from .integrity import check_sequence
+def _stop_message(name, source, stop):
+    return (f"{name} ({source or 'frames'}) has {'; '.join(stop)}: tracking them would give wrong "
+            f"positions at the wrong times. Fix the sequence (see `wingphoto check`), or pass force=True "
+            f"(--force) to track it anyway")
+
+
+def _watched(frames, name, *, force):
+    """Open ``frames`` for tracking, checked by :func:`wingphoto.check_sequence` on the same reads.
+
+    Stray files stop the run here; the frames are checked as the tracker reads them (a
+    :class:`~wingphoto.integrity.SequenceScan`), and a duplicated frame stops it when it
+    is read - unless ``force``. Returns (the frames to track, the scan); after tracking,
+    :func:`_finish_check` completes the scan.
+    """
+    from .integrity import SequenceScan
 
     seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
-    report = check_sequence(seq)
-    stop = []
-    if len(report.duplicates):
-        stop.append(f"duplicated frame(s) at index {', '.join(str(int(i)) for i in report.duplicates[:8])}")
-    if report.strays:
-        stop.append(f"stray file(s) {', '.join(Path(p).name for p in report.strays[:3])}")
+    scan = SequenceScan(seq)
+    strays = list(getattr(seq, "strays", []))
+    if strays and not force:
+        raise ValueError(_stop_message(name, scan.source,
+                                       [f"stray file(s) {', '.join(Path(p).name for p in strays[:3])}"]))
+
+    def on_duplicate(t):
+        if not force:
+            raise ValueError(_stop_message(name, scan.source, [f"duplicated frame(s) at index {t}"]))
+
+    return scan.watch(seq, on_duplicate=on_duplicate), scan
+
+
+def _finish_check(scan, name, *, force):
+    """The scan's report (reading the frames the tracker did not read in order, if any):
+    blank frames, jumps and gaps are logged; duplicates found only now stop unless forced."""
+    report = scan.report()
     for line in report.problems():
         if not any(line.startswith(k) for k in ("stray", "duplic")) and "identical" not in line:
             log.warning("%s: %s", name, line)
-    if stop and not force:
-        raise ValueError(
-            f"{name} ({report.source or 'frames'}) has {'; '.join(stop)}: tracking them would give wrong "
-            f"positions at the wrong times. Fix the sequence (see `wingphoto check`), or pass force=True "
-            f"(--force) to track it anyway"
-        )
-    return seq, report
+    if len(report.duplicates) and not force:
+        raise ValueError(_stop_message(name, report.source, [
+            f"duplicated frame(s) at index {', '.join(str(int(i)) for i in report.duplicates[:8])}"]))
+    return report
 
 
 def _check_pick_frames(table, n_frames, source, camera):
@@ -161,8 +181,11 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     checkpoint : str or Path, optional
         Checkpoint file; a rerun resumes from it with identical results.
     check : bool
-        Run :func:`wingphoto.check_sequence` first (default True): duplicated frames and
-        stray files stop the run unless ``force``; blank frames, jumps and gaps are logged.
+        Run :func:`wingphoto.check_sequence` (default True) on the frames as the tracker
+        reads them (each frame is read once; frames the tracker did not read in order -
+        after a resume, or before a pick made in a later frame - are read for the check
+        after tracking): stray files stop the run before tracking and a duplicated frame
+        when it is read, unless ``force``; blank frames, jumps and gaps are logged.
     force : bool
         Track despite a failed check.
 
@@ -176,16 +199,25 @@ def track_folder(frames, picks, *, camera="left", out=None, checkpoint=None, pro
     for path in (out, checkpoint):
         if path is not None:
             check_output_path(path)  # refuse a folder or FIFO before tracking, not after
+    name = f"{camera} sequence"
     if check:
-        seq, _ = _checked(frames, f"{camera} sequence", force=force)
+        seq, scan = _watched(frames, name, force=force)
     else:
         seq = read_sequence(frames) if isinstance(frames, (str, Path)) else frames
     table = load_picks(picks, camera) if isinstance(picks, (str, Path)) else picks
     _check_pick_frames(table, len(seq), picks if isinstance(picks, (str, Path)) else "the picks table", camera)
     tracks = track_markers(seq, table, camera=camera, checkpoint=checkpoint, progress=progress, **options)
+    if check:
+        _finish_check(scan, name, force=force)
     if out is not None:
         write_tracks_csv(tracks, out)
     return tracks
+
+
+def _stereo_stop(problems):
+    return ("left and right sequences do not match: " + "; ".join(problems)
+            + ". Fix the sequences (`wingphoto check LEFT --right RIGHT` shows the full report), "
+            "or pass force=True (--force) to track them anyway")
 
 
 def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, progress=True, check=True,
@@ -205,9 +237,13 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
         Folder for per-camera checkpoints (``checkpoint_left.npz`` ...), so an interrupted
         run resumes.
     check : bool
-        Run :func:`wingphoto.check_stereo_sequences` first (default True): a left/right
-        mismatch (frame counts, rates, time stamps, a frame offset, duplicated frames,
-        gaps or stray files) stops with a message naming it, unless ``force``.
+        Run :func:`wingphoto.check_stereo_sequences` (default True): a left/right mismatch
+        (frame counts, rates, time stamps, a frame offset, duplicated frames, gaps or stray
+        files) stops with a message naming it, unless ``force``. Each view is checked on
+        the frames as the tracker reads them (one read per frame): different frame counts
+        and stray files stop the run before tracking, a duplicated frame when it is read,
+        and the rest (a frame offset, rates, time stamps, gaps) once both views are tracked
+        (with ``checkpoint_dir``, a rerun with ``force=True`` then resumes at once).
     force : bool
         Go on despite a failed check (the findings are logged).
     **options
@@ -230,28 +266,45 @@ def track_stereo(frames_left, frames_right, picks, rig, *, checkpoint_dir=None, 
         tables = picks
     else:  # a PickerState
         tables = {cam: picks.to_frame(cam) for cam in ("left", "right")}
+    views = {"left": frames_left, "right": frames_right}
+    scans = {}
     if check:
-        from .integrity import check_stereo_sequences
+        from .integrity import SequenceScan, check_stereo_sequences
 
-        frames_left = read_sequence(frames_left) if isinstance(frames_left, (str, Path)) else frames_left
-        frames_right = read_sequence(frames_right) if isinstance(frames_right, (str, Path)) else frames_right
-        report = check_stereo_sequences(frames_left, frames_right, rig=rig)
+        views = {cam: read_sequence(f) if isinstance(f, (str, Path)) else f for cam, f in views.items()}
+        # what needs no frame read stops the run before tracking; the rest is checked on
+        # the tracker's reads and judged once both views are tracked
+        early = [] if len(views["left"]) == len(views["right"]) else [
+            f"frame counts differ: left {len(views['left'])}, right {len(views['right'])}"]
+        for cam, seq in views.items():
+            strays = list(getattr(seq, "strays", []))
+            if strays:
+                early.append(f"{cam}: {len(strays)} stray file(s): {', '.join(Path(p).name for p in strays[:3])}")
+        if early and not force:
+            raise ValueError(_stereo_stop(early))
+        for cam in views:
+            scans[cam] = SequenceScan(views[cam])
+
+            def on_duplicate(t, cam=cam):
+                if not force:
+                    raise ValueError(_stereo_stop([f"{cam}: duplicated frame(s) at index {t}"]))
+
+            views[cam] = scans[cam].watch(views[cam], on_duplicate=on_duplicate)
+    tracks = {}
+    for cam, frames in views.items():
+        ckpt = None if checkpoint_dir is None else Path(checkpoint_dir) / f"checkpoint_{cam}.npz"
+        tracks[cam] = track_folder(frames, tables[cam], camera=cam, checkpoint=ckpt, progress=progress,
+                                   check=False, **options)
+    if check:
+        report = check_stereo_sequences(scans["left"].seq, scans["right"].seq, rig=rig,
+                                        reports=(scans["left"].report(), scans["right"].report()))
         for note in report.notes:
             log.warning("%s", note)
         if not report.ok:
             if not force:
-                raise ValueError(
-                    "left and right sequences do not match: " + "; ".join(report.problems)
-                    + ". Fix the sequences (`wingphoto check LEFT --right RIGHT` shows the full report), "
-                    "or pass force=True (--force) to track them anyway"
-                )
+                raise ValueError(_stereo_stop(report.problems))
             for problem in report.problems:
                 log.warning("forced past a failed sequence check: %s", problem)
-    tracks = {}
-    for cam, frames in (("left", frames_left), ("right", frames_right)):
-        ckpt = None if checkpoint_dir is None else Path(checkpoint_dir) / f"checkpoint_{cam}.npz"
-        tracks[cam] = track_folder(frames, tables[cam], camera=cam, checkpoint=ckpt, progress=progress,
-                                   check=False, **options)
     tl, tr = check_stereo(tracks["left"], tracks["right"], rig)
     points = triangulate_tracks(tl, tr, rig)
     return pd.concat([tl, tr], ignore_index=True), points

@@ -1,29 +1,34 @@
 """Checkpoints: save and resume a tracking run.
 
-A checkpoint (``.npz``, written atomically) holds the result arrays, the tracker's state
-and a fingerprint of what the run was given: the picks, the options, the sequence's
+A checkpoint (``.npz``, written atomically) holds the result arrays, the tracker's state,
+where the run stands (its pass and next frame) and a fingerprint of what the run was
+given: the picks (with the frames they were made in), the options, the sequence's
 length, size and type, and the *content* of up to :data:`FINGERPRINT_FRAMES` frames
-sampled across the frames tracked so far (the first, the last tracked and evenly spaced
-ones between: the saved state depends on those frames only). A checkpoint written
+sampled from frame 0 to the highest frame read so far (evenly spaced: the saved state
+depends on those frames only). A checkpoint written
 for other frames, picks or options is refused with a message; so is a file that is not a
 wingphoto checkpoint (empty, truncated, foreign).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import signal
+import threading
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-_CHECKPOINT_VERSION = 3
+_CHECKPOINT_VERSION = 4  # 4: passes of picks in several frames
 #: Frames whose content the fingerprint hashes (spread over the sequence).
 FINGERPRINT_FRAMES = 8
 _WAY_OUT = "delete it or pass another checkpoint path"
 
 
 def _fingerprint(fr, xy, ids, half, params, camera, bidirectional, pick_frames=None):
+    """Hash of a run's inputs: picks (NaN ones too), pick frames, options, the frames' layout."""
     hsh = hashlib.sha1()
     hsh.update(np.nan_to_num(np.ascontiguousarray(xy), nan=-1e300).tobytes())
     hsh.update(np.ascontiguousarray(ids).tobytes())
@@ -98,13 +103,19 @@ def _load_checkpoint(path, fingerprint, fr, required=()):
         raise ValueError(f"checkpoint {path} was written for other frames, picks or options (the content of "
                          f"frames {sampled} differs); {_WAY_OUT}")
     missing = [k for k in required if k not in arrays]
-    if missing or "phase" not in meta or "next" not in meta:
-        raise ValueError(f"checkpoint {path} is incomplete (lacks {missing or ['phase/next']}); {_WAY_OUT}")
+    if missing or "pass" not in meta or "next" not in meta:
+        raise ValueError(f"checkpoint {path} is incomplete (lacks {missing or ['pass/next']}); {_WAY_OUT}")
     return meta, arrays
 
 
 def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
-    """Run ``tracker`` over ``frames_order`` (iterable of frame indices), checkpointing."""
+    """Run ``tracker`` over ``frames_order`` (a range of frame indices) into ``res``.
+
+    ``ckpt`` (or None) is told of each tracked frame (``ckpt.completed(t)``) and asked to
+    save (``ckpt.save()``) when the pass stops on an exception (Ctrl-C, a read error).
+    With ``ckpt``, a Ctrl-C that arrives while a frame is being tracked takes effect when
+    that frame is done (a second Ctrl-C at once): a checkpoint never holds half a frame.
+    """
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(frames_order), disable=not progress, desc=desc, leave=False)
@@ -114,13 +125,16 @@ def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
     tracker._prev = fr[first] if 0 <= first < len(fr) else None
     tracker._prev2 = fr[first - direction] if 0 <= first - direction < len(fr) else None
     try:
-        for t in frames_order:
-            tracker.step(fr[t], t, res, direction)
-            done += 1
-            if ckpt is not None:
-                ckpt.completed(t)
-            if done & 255 == 0:
-                bar.update(256)
+        with _whole_frames(ckpt is not None) as interrupted:
+            for t in frames_order:
+                tracker.step(fr[t], t, res, direction)
+                done += 1
+                if ckpt is not None:
+                    ckpt.completed(t)
+                if interrupted:
+                    raise KeyboardInterrupt
+                if done & 255 == 0:
+                    bar.update(256)
     except BaseException:
         if ckpt is not None:
             ckpt.save()
@@ -130,7 +144,33 @@ def _run_pass(fr, tracker, res, frames_order, direction, ckpt, progress, desc):
         bar.close()
 
 
+@contextlib.contextmanager
+def _whole_frames(enabled):
+    """Defer a Ctrl-C (SIGINT) to the end of the frame under way; yields the list a deferred
+    one is noted in. Only where Python's own handler is installed, in the main thread (not
+    under a handler of the caller's); a second Ctrl-C raises at once."""
+    pending = []
+    if not (enabled and threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        yield pending
+        return
+
+    def note(signum, frame):
+        if pending:
+            raise KeyboardInterrupt
+        pending.append(signum)
+
+    signal.signal(signal.SIGINT, note)
+    try:
+        yield pending
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 class _Checkpointer:
+    """Saves ``state_fn()`` (meta with ``read``, the highest frame read, and arrays) to
+    ``path`` every ``every`` completed frames and when asked (:meth:`save`)."""
+
     def __init__(self, path, fingerprint, every, state_fn, fr):
         self.fr = fr
         self.path = Path(path)
@@ -152,8 +192,7 @@ class _Checkpointer:
         meta, arrays = self.state_fn()
         meta["version"] = _CHECKPOINT_VERSION
         meta["fingerprint"] = self.fingerprint
-        last = int(meta["next"]) - 1 if meta.get("phase") == "forward" else len(self.fr) - 1
-        meta["sampled"] = _sampled_frames(min(last, len(self.fr) - 1))
+        meta["sampled"] = _sampled_frames(min(int(meta["read"]), len(self.fr) - 1))
         meta["content"] = _content(self.fr, meta["sampled"])
         _save_checkpoint(self.path, meta, arrays)
         self.since = 0

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import _Checkpointer, _fingerprint, _load_checkpoint, _run_pass
+from .checkpoint import (
+    _WAY_OUT,
+    _Checkpointer,
+    _fingerprint,
+    _load_checkpoint,
+    _run_pass,
+)
 from .inputs import _Frames, _parse_picks
 from .options import TrackOptions
-from .results import _Results, _merge_backward, _tracks_frame
+from .results import _merge_backward, _Results, _tracks_frame
 from .status import _R, FLAGGED, OK
 from .tracker import Tracker as _Tracker
 
@@ -71,14 +77,16 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         Any other field of :class:`~wingphoto.track.TrackOptions` by name (``min_score``,
         ``max_coast``, ``search_every`` ...).
     bidirectional : bool
-        Also track backwards from the last frame; flag ``fb_disagree`` where the passes
-        disagree by more than ``fb_tolerance`` px and use the backward position where only
-        it is ok. Doubles the run time.
+        Check each pass by tracking back over it: from the last frame back to the frame the
+        markers were picked in, and (picks in a later frame ``k``) from frame 0 forward to
+        ``k``; flag ``fb_disagree`` where the passes disagree by more than ``fb_tolerance``
+        px and use the checking pass's position where only it is ok (and it agreed further
+        along). Doubles the run time.
     checkpoint : str or Path, optional
         File (``.npz``) holding the state; saved atomically every ``checkpoint_every``
-        frames and when the run stops on an exception. If it exists and was written for
-        the same frames, picks and options, tracking resumes from it with identical
-        results.
+        frames and when the run stops on an exception (a Ctrl-C takes effect at the end of
+        the frame under way). If it exists and was written for the same frames, picks
+        (with their frames) and options, tracking resumes from it with identical results.
     checkpoint_every : int
         Frames between two checkpoint saves (default 500).
     progress : bool
@@ -126,95 +134,27 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
     (24.0, 18.0, 'ok')
     """
     fr = _Frames(frames)
-    xy_all, ids_all, half_all, pf_all = _parse_picks(picks)
-    active = np.all(np.isfinite(xy_all), axis=1)
+    xy, ids, half, pick_frames = _parse_picks(picks)
+    active = np.all(np.isfinite(xy), axis=1)
     if not active.all():
         logger.warning("picks of points %s are NaN: those points are reported lost (reason 'no_pick')",
-                       ids_all[~active].tolist())
-    late = active & (pf_all >= fr.n)
+                       ids[~active].tolist())
+    late = active & (pick_frames >= fr.n)
     if late.any():
         k = int(np.flatnonzero(late)[0])
-        raise ValueError(f"point {ids_all[k]} was picked in frame {pf_all[k]} but the sequence has {fr.n} frames "
+        raise ValueError(f"point {ids[k]} was picked in frame {pick_frames[k]} but the sequence has {fr.n} frames "
                          "(0 to {}); pick it in a frame of this sequence".format(fr.n - 1))
-    xy, ids, half = xy_all[active], ids_all[active], half_all[active]
     p = _resolve_options(options, search_radius=search_radius, max_sigma=max_sigma, polarity=polarity, **expert)
-    if (pf_all[active] != 0).any():
-        if checkpoint is not None:
-            raise ValueError("checkpoint= needs every marker picked in frame 0 (these picks were made in frames "
-                             f"{sorted(set(pf_all[active].tolist()))}); track without a checkpoint")
-        return _track_from_pick_frames(fr, xy_all, ids_all, half_all, pf_all, active, p, camera, progress)
-    T, N = fr.n, len(xy)
-    shape = fr.shape
-    fw = _Results(T, N)
-    bw = _Results(T, N) if bidirectional else None
-    box = {}
-
-    def state():
-        meta = {"phase": box["phase"], "next": box["next"]}
-        arrays = fw.arrays("fw_")
-        if bw is not None:
-            arrays.update(bw.arrays("bw_"))
-        arrays.update({"st_" + k: v for k, v in box["tracker"].state().items()})
-        return meta, arrays
-
+    run = _Run(fr, xy, ids, half, pick_frames, active, p, bidirectional)
     ck = None
-    resumed = None
     if checkpoint is not None:
-        fp = _fingerprint(fr, xy, ids, half, p, camera, bidirectional)
-        ck = _Checkpointer(checkpoint, fp, checkpoint_every, state, fr)
+        fp = _fingerprint(fr, xy, ids, half, p, camera, bidirectional, pick_frames)
+        ck = _Checkpointer(checkpoint, fp, checkpoint_every, run.state, fr)
         if Path(checkpoint).exists():
-            resumed = _load_checkpoint(checkpoint, fp, fr, required=[p_ + k for p_ in ("fw_",)
-                                                                 for k in _Results.names + ("status", "reason")])
-    if resumed is None:
-        tracker = _Tracker.from_picks(fr[0], xy, half, p, fr.is_u8, ids)
-        _seed_row(fw, 0, tracker)
-        box.update(phase="forward", next=1, tracker=tracker)
-    else:
-        meta, arrays = resumed
-        fw.load(arrays, "fw_")
-        if bw is not None and "bw_x" in arrays:
-            bw.load(arrays, "bw_")
-        st = {k[3:]: v for k, v in arrays.items() if k.startswith("st_")}
-        try:
-            tracker = _Tracker.from_state(st, p, fr.is_u8, shape)
-        except (KeyError, ValueError, IndexError) as exc:
-            raise ValueError(f"checkpoint {checkpoint} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
-                             "delete it or pass another checkpoint path") from None
-        box.update(phase=meta["phase"], next=int(meta["next"]), tracker=tracker)
-        logger.info("resuming %s pass at frame %d from %s", meta["phase"], meta["next"], checkpoint)
-
-    if ck is not None:
-        orig_completed = ck.completed
-
-        def completed(t):
-            box["next"] = t + (1 if box["phase"] == "forward" else -1)
-            orig_completed(t)
-
-        ck.completed = completed
-
-    if box["phase"] == "forward":
-        _run_pass(fr, box["tracker"], fw, range(box["next"], T), 1, ck, progress, f"track {camera}")
-        if bidirectional:
-            box["tracker"] = _backward_tracker(box["tracker"], fw, T)
-            box.update(phase="backward", next=T - 2)
-            bw.x[T - 1], bw.y[T - 1] = fw.x[T - 1], fw.y[T - 1]
-            bw.status[T - 1], bw.reason[T - 1] = fw.status[T - 1], fw.reason[T - 1]
-            bw.score[T - 1], bw.sigma[T - 1] = fw.score[T - 1], fw.sigma[T - 1]
-            bw.xpix[T - 1], bw.ypix[T - 1] = fw.xpix[T - 1], fw.ypix[T - 1]
-    if box["phase"] == "backward":
-        _run_pass(fr, box["tracker"], bw, range(box["next"], -1, -1), -1, ck, progress, f"back {camera}")
-    if box["phase"] in ("forward", "backward"):
-        box["phase"] = "done"
-        box["next"] = T
-        if ck is not None:
-            ck.save()
-    if bidirectional:
-        fw2 = _Results(T, N)
-        for k in _Results.names + ("status", "reason"):
-            getattr(fw2, k)[...] = getattr(fw, k)
-        _merge_backward(fw2, bw, p.fb_tolerance)
-        return _tracks_frame(_expand(fw2, active), ids_all, camera)
-    return _tracks_frame(_expand(fw, active), ids_all, camera)
+            meta, arrays = _load_checkpoint(checkpoint, fp, fr, required=run.required())
+            run.resume(meta, arrays, checkpoint)
+    run.run(ck, progress, camera)
+    return _tracks_frame(run.merged(), ids, camera)
 
 
 def _seed_row(res, k, tracker):
@@ -231,73 +171,230 @@ def _seed_row(res, k, tracker):
     res.reason[k, moved] = _R["pick_moved"]
 
 
-def _track_from_pick_frames(fr, xy_all, ids_all, half_all, pf_all, active, p, camera, progress):
-    """Track markers picked in several frames: each group of markers picked in frame k is
-    tracked forward from k to the end and backward from k to frame 0."""
-    T, N = fr.n, len(ids_all)
-    out = _Results(T, N)
-    out.reason[:, ~active] = _R["no_pick"]
-    for k in np.unique(pf_all[active]).tolist():
-        sel = np.flatnonzero(active & (pf_all == k))
-        res = _Results(T, sel.size)
-        args = (fr[k], xy_all[sel], half_all[sel], p, fr.is_u8, ids_all[sel])
+@dataclasses.dataclass(frozen=True)
+class _Pass:
+    """One pass of a run: frames ``first`` to ``last`` (inclusive) in ``direction`` (+1/-1).
 
-        def start():
-            tracker = _Tracker.from_picks(*args)
+    A ``"track"`` pass follows group ``group`` (the markers picked in one frame ``k``) away
+    from its picks: forward from ``k + 1`` to the last frame, or backward from ``k - 1``
+    to frame 0. A ``"verify"`` pass (``bidirectional=True``) tracks the same markers back
+    towards ``k`` from where the track pass before it ended, seeded from that pass.
+    """
+
+    group: int
+    kind: str
+    first: int
+    last: int
+    direction: int
+
+    def frames(self, start):
+        """The frames still to track from ``start`` on (a range, empty when done)."""
+        return range(start, self.last + self.direction, self.direction)
+
+
+def _plan(pick_frames, T, bidirectional):
+    """The passes of a run over ``T`` frames for groups picked in ``pick_frames`` (in order).
+
+    Each group is tracked forward from its pick frame ``k`` to the end and backward to
+    frame 0; with ``bidirectional`` each of these is followed by its verify pass (from the
+    end back to ``k``; from frame 0 forward to ``k - 1``). A side with no frames to track
+    (``k`` the last frame, or frame 0) has no passes. Picks all in frame 0 give the
+    classic forward pass and, bidirectional, the backward pass from the last frame.
+    """
+    plan = []
+    for g, k in enumerate(pick_frames):
+        if k < T - 1:
+            plan.append(_Pass(g, "track", k + 1, T - 1, 1))
+            if bidirectional:
+                plan.append(_Pass(g, "verify", T - 2, k, -1))
+        if k > 0:
+            plan.append(_Pass(g, "track", k - 1, 0, -1))
+            if bidirectional:
+                plan.append(_Pass(g, "verify", 1, k - 1, 1))
+    return plan
+
+
+class _Run:
+    """A tracking run: its passes, their result arrays, and where it stands.
+
+    The markers are grouped by the frame they were picked in; each group has its own
+    tracker and result arrays (``res``; ``ver`` for the verify passes). The run's state
+    (pass index, next frame, the current tracker, every result array) is what a
+    checkpoint saves and what :meth:`resume` restores, so a resumed run takes exactly
+    the steps an uninterrupted one would.
+    """
+
+    def __init__(self, fr, xy, ids, half, pick_frames, active, p, bidirectional):
+        self.fr, self.p = fr, p
+        self.xy, self.ids, self.half = xy, ids, half
+        self.active = active
+        self.ks = np.unique(pick_frames[active]).tolist()
+        self.sel = [np.flatnonzero(active & (pick_frames == k)) for k in self.ks]
+        T = fr.n
+        self.res = [_Results(T, s.size) for s in self.sel]
+        self.ver = [_Results(T, s.size) for s in self.sel] if bidirectional else None
+        self.passes = _plan(self.ks, T, bidirectional)
+        self.i = 0  # the pass under way (len(passes): done)
+        self.next = None  # its next frame (None: not started)
+        self.read = 0  # the highest frame index read so far (the fingerprint samples 0 .. read)
+        self.tracker = None
+        self.ck = None
+        self.resumed = False
+
+    # ------------------------------------------------------------ checkpoint state
+    def _prefixes(self):
+        for g in range(len(self.sel)):
+            yield f"g{g}_", self.res[g]
+            if self.ver is not None:
+                yield f"v{g}_", self.ver[g]
+
+    def required(self):
+        """Names of the arrays a checkpoint of this run must hold."""
+        return [pre + k for pre, _ in self._prefixes() for k in _Results.names + ("status", "reason")]
+
+    def state(self):
+        """(meta, arrays) of a checkpoint."""
+        meta = {"pass": self.i, "next": self.next, "read": self.read, "n_passes": len(self.passes)}
+        arrays = {}
+        for pre, r in self._prefixes():
+            arrays.update(r.arrays(pre))
+        if self.tracker is not None:
+            arrays.update({"st_" + k: v for k, v in self.tracker.state().items()})
+        return meta, arrays
+
+    def resume(self, meta, arrays, path):
+        """Restore the state a checkpoint (``path``) saved."""
+        i, nxt = meta.get("pass"), meta.get("next")
+        if not (meta.get("n_passes") == len(self.passes) and isinstance(i, int) and 0 <= i <= len(self.passes)
+                and (nxt is None or isinstance(nxt, int))):
+            raise ValueError(f"checkpoint {path} is incomplete or corrupt (pass {i!r} of "
+                             f"{meta.get('n_passes')!r}, next frame {nxt!r}); {_WAY_OUT}")
+        for pre, r in self._prefixes():
+            r.load(arrays, pre)
+        self.i, self.next, self.read = i, nxt, int(meta.get("read", 0))
+        self.resumed = True
+        if i < len(self.passes) and (nxt is not None or "st_h" in arrays):
+            st = {k[3:]: v for k, v in arrays.items() if k.startswith("st_")}
+            try:
+                self.tracker = _Tracker.from_state(st, self.p, self.fr.is_u8, self.fr.shape)
+            except (KeyError, ValueError, IndexError) as exc:
+                raise ValueError(f"checkpoint {path} is incomplete or corrupt ({type(exc).__name__}: {exc}); "
+                                 f"{_WAY_OUT}") from None
+        if i < len(self.passes):
+            logger.info("resuming pass %d of %d at frame %s from %s", i + 1, len(self.passes), nxt, path)
+
+    def completed(self, t):
+        """Frame ``t`` of the current pass was tracked (called by :func:`_run_pass`)."""
+        self.next = t + self.passes[self.i].direction
+        self.read = max(self.read, t)
+        if self.ck is not None:
+            self.ck.completed(t)
+
+    def save(self):
+        """Save a checkpoint, if the run has one (called by :func:`_run_pass` when it stops)."""
+        if self.ck is not None:
+            self.ck.save()
+
+    # ------------------------------------------------------------ passes
+    def _start(self, ps):
+        """The tracker of pass ``ps``, its first row written (the picks, or the seed of a verify)."""
+        g = ps.group
+        k, sel = self.ks[g], self.sel[g]
+        self.read = max(self.read, k)
+        if ps.kind == "track":
+            tracker = _Tracker.from_picks(self.fr[k], self.xy[sel], self.half[sel], self.p, self.fr.is_u8,
+                                          self.ids[sel])
             tracker.hist_t[:] = k
             tracker.last_ok[:] = k
             tracker.last_upd[:] = k
+            _seed_row(self.res[g], k, tracker)
             return tracker
+        end = ps.first - ps.direction  # where the track pass before it ended (the last frame or 0)
+        _copy_row(self.ver[g], self.res[g], end)
+        return _reverse_tracker(self.tracker, self.res[g], end, k)
 
-        tracker = start()
-        _seed_row(res, k, tracker)
-        if k < T - 1:
-            _run_pass(fr, tracker, res, range(k + 1, T), 1, None, progress, f"track {camera} from {k}")
-        if k > 0:
-            _run_pass(fr, start(), res, range(k - 1, -1, -1), -1, None, progress, f"back {camera} from {k}")
-        for name in _Results.names + ("status", "reason"):
-            getattr(out, name)[:, sel] = getattr(res, name)
-    return _tracks_frame(out, ids_all, camera)
+    def run(self, ck, progress, camera):
+        """Run (or finish) every pass, saving to the checkpointer ``ck`` (or None)."""
+        self.ck = ck
+        todo = self.i < len(self.passes) or not self.resumed  # a finished checkpoint is not saved again
+        try:
+            while self.i < len(self.passes):
+                ps = self.passes[self.i]
+                if self.next is None:
+                    self.tracker = self._start(ps)
+                    self.next = ps.first
+                out = self.res[ps.group] if ps.kind == "track" else self.ver[ps.group]
+                k = self.ks[ps.group]
+                desc = (f"{'track' if ps.direction > 0 else 'back'} {camera}" + (f" from {k}" if k else "")
+                        + (" (check)" if ps.kind == "verify" else ""))
+                _run_pass(self.fr, self.tracker, out, ps.frames(self.next), ps.direction, self, progress, desc)
+                self.i += 1
+                self.next = None
+        except BaseException:
+            if self.tracker is not None:  # (also stopped between two passes: the state is whole there too)
+                self.save()
+            raise
+        if todo:
+            self.save()
+
+    def merged(self):
+        """The (T, N) results of every point: verify passes merged, ``no_pick`` rows for NaN picks."""
+        T, N = self.fr.n, len(self.ids)
+        out = _Results(T, N)
+        out.reason[:, ~self.active] = _R["no_pick"]
+        for g, (k, sel) in enumerate(zip(self.ks, self.sel)):
+            res = _Results(T, sel.size)
+            for name in _Results.names + ("status", "reason"):
+                getattr(res, name)[...] = getattr(self.res[g], name)
+            if self.ver is not None:
+                # each side of k in the verify pass's own order (the backward side reversed)
+                _merge_backward(res.rows(slice(k, None)), self.ver[g].rows(slice(k, None)), self.p.fb_tolerance)
+                if k > 0:
+                    low = slice(k - 1, None, -1)
+                    _merge_backward(res.rows(low), self.ver[g].rows(low), self.p.fb_tolerance)
+            for name in _Results.names + ("status", "reason"):
+                getattr(out, name)[:, sel] = getattr(res, name)
+        return out
 
 
-def _expand(res, active):
-    """Results of the picked points, with lost rows ('no_pick') for points without a pick."""
-    if active.all():
-        return res
-    T = res.x.shape[0]
-    out = _Results(T, len(active))
-    for k in _Results.names + ("status", "reason"):
-        getattr(out, k)[:, active] = getattr(res, k)
-    out.reason[:, ~active] = _R["no_pick"]
-    return out
+def _copy_row(dst, src, t):
+    """Row ``t`` of every result array of ``src`` into ``dst``."""
+    for name in _Results.names + ("status", "reason"):
+        getattr(dst, name)[t] = getattr(src, name)[t]
 
 
-def _backward_tracker(fwd, fw, T):
-    """A tracker seeded at the last frame from the forward pass (same templates)."""
+def _reverse_tracker(tracker, res, end, k):
+    """A tracker for the verify pass back from frame ``end`` towards the pick frame ``k``.
+
+    It keeps ``tracker``'s templates (the original ones, without the running updates)
+    and restarts the motion model of each marker at its ok position nearest to ``end``
+    in ``res`` (on the side of ``k`` that ``end`` is on; the pick itself when none is
+    ok), lost when that is more than ``max_coast`` frames from ``end``.
+    """
     import copy
 
-    b = copy.copy(fwd)
-    n = len(fwd.h)
+    b = copy.copy(tracker)
+    n = len(tracker.h)
     b.hist_x = np.full((n, 3, 2), np.nan)
     b.hist_t = np.zeros((n, 3), np.int64)
     b.nh = np.ones(n, np.int64)
     b.lostflag = np.zeros(n, bool)
     b.resid_rms = np.ones(n)
-    b.last_upd = np.full(n, T - 1, np.int64)
-    b.last_ok = np.full(n, T - 1, np.int64)
-    b.tplr = [t.copy() for t in fwd.tpl0]
+    b.last_upd = np.full(n, end, np.int64)
+    b.last_ok = np.full(n, end, np.int64)
+    b.tplr = [t.copy() for t in tracker.tpl0]
     b.tplu = [None] * n
     b.last_score = np.ones(n)
     b._init_stack()
+    lo, hi = (k, end) if end >= k else (end, k)
     for i in range(n):
-        okf = np.flatnonzero(fw.status[:, i] == OK)
-        tl = int(okf[-1]) if okf.size else 0
-        b.hist_x[i, 0] = (fw.x[tl, i], fw.y[tl, i])
+        okf = lo + np.flatnonzero(res.status[lo:hi + 1, i] == OK)
+        tl = (int(okf[-1]) if end >= k else int(okf[0])) if okf.size else k
+        b.hist_x[i, 0] = (res.x[tl, i], res.y[tl, i])
         b.hist_t[i, 0] = tl
         b.last_ok[i] = tl
-        b.lostflag[i] = tl < T - 1 - fwd.p.max_coast
+        b.lostflag[i] = abs(end - tl) > tracker.p.max_coast
     return b
-
 
 
 def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, conflict_px=3.0,

@@ -86,6 +86,29 @@ WEIGHT_FRACTION = 0.2
 #: spot on a marker (a specular highlight) then weighs little more than its face (1.0
 #: clipped faded, edge-on smears so hard that a re-acquired marker landed on a neighbour).
 CLIP_LEVEL = 1.2
+#: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
+#: CONTRAST_FACE times its face - the median of its disk pixels above CONTRAST_FLOOR of the
+#: peak (and 3 noise sigmas). A small bright highlight on a dim face (real dots: a specular
+#: spot of ~200 DN on a ~35 DN face) then does not set the cut: a cut at a fifth of the
+#: highlight dropped the face and centred the highlight, up to 2 px off the shape's centre
+#: (real photographs: 90th percentile of the error 0.61 -> 0.31 px). A smooth blob (a
+#: disc; a Gaussian, whose face is ~0.32 of its peak) keeps its peak.
+CONTRAST_FLOOR, CONTRAST_FACE = 0.1, 3.0
+
+
+def _contrast(sig, disk, peak, noise):
+    """The contrast of each blob (see :data:`CONTRAST_FACE`): (n,) float32.
+
+    sig : (n, K) background-subtracted patch values (0 outside the disk), disk (n, K) bool,
+    peak (n,) the largest of them, noise (n,) the noise sigma."""
+    floor = np.maximum(CONTRAST_FLOOR * peak, 3.0 * np.asarray(noise, np.float32)).astype(np.float32)
+    m = disk & (sig > floor[:, None])
+    out = peak.astype(np.float32).copy()
+    has = m.any(1)
+    if has.any():
+        face = np.nanmedian(np.where(m[has], sig[has], np.nan), axis=1)
+        out[has] = np.minimum(out[has], CONTRAST_FACE * face)
+    return out
 
 
 def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
@@ -163,7 +186,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         # weights: the value above the cut, clipped at CLIP_LEVEL times the blob's median
         # value above the cut - a bright spot on the marker (a specular highlight) weighs
         # little more than the rest of its face: the centre is nearer the shape's
-        cut = (wfrac * peak)[:, None]
+        cut = (wfrac * _contrast(sig, disk, peak, noise))[:, None]
         above = sig > cut
         level = np.full(n, np.inf, np.float32)
         has = above.any(1)
@@ -284,6 +307,22 @@ def _disk_peak(du, dv, dval, nd, pa, pb, pc):
 
 
 @jit
+def _contrast_kernel(du, dv, dval, nd, pa, pb, pc, peak, noise_i, scratch, lo):
+    """Compiled twin of :func:`_contrast` for one marker (``scratch[lo:]``: room for the
+    disk's values; reordered)."""
+    floor = max(CONTRAST_FLOOR * peak, 3.0 * noise_i)
+    nl = 0
+    for k in range(nd):
+        res = dval[k] - (pa + pb * du[k] + pc * dv[k])
+        if res > floor:
+            scratch[lo + nl] = res
+            nl += 1
+    if nl == 0:
+        return peak
+    return min(peak, CONTRAST_FACE * _median_inplace(scratch, lo, nl))
+
+
+@jit
 def _median_inplace(a, lo, n):
     """Median of ``a[lo:lo + n]`` (n >= 1) by partial selection, reordering that slice in place.
 
@@ -400,7 +439,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     if nout > 0 and nr - nout >= 8:
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-    cut = wfrac * peak if wfrac > 0 else 0.0
+    cut = wfrac * _contrast_kernel(du, dv, dval, nd, pa, pb, pc, peak, noise_i, rval, nr) if wfrac > 0 else 0.0
     # the clip level: CLIP_LEVEL times the blob's median value above the cut
     level = np.inf
     if wfrac > 0:

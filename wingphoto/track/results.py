@@ -32,6 +32,13 @@ class _Results:
         for k in self.names + ("status", "reason"):
             getattr(self, k)[...] = d[prefix + k]
 
+    def rows(self, sl):
+        """A view of the rows ``sl`` (a slice, possibly reversed): writing to it writes here."""
+        view = object.__new__(_Results)
+        for k in self.names + ("status", "reason"):
+            setattr(view, k, getattr(self, k)[sl])
+        return view
+
 
 def _tracks_frame(res, ids, camera, frames_idx=None):
     import pandas as pd

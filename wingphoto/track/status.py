@@ -43,6 +43,7 @@ _R = {name: i for i, name in enumerate(REASONS)}
 
 #: The status rules, in order (the last that applies wins): (reason, status, condition).
 RULES = (
+    ("imprecise", FLAGGED, "sigma > max_sigma (a precision flag: any identity rule below overrides it)"),
     ("low_score", FLAGGED, "score < min_score"),
     ("no_signal", FLAGGED, "mass < min_mass_ratio * frame-0 mass"),
     ("merged", FLAGGED, "mass > max_mass_ratio * running mass (off by default)"),
@@ -50,7 +51,6 @@ RULES = (
     ("ambiguous", FLAGGED, "an unexplained second correlation peak within ambiguity_margin"),
     ("jump", FLAGGED, "refined point further from the prediction than the motion model allows"),
     ("foreign", FLAGGED, "something bright no known marker explains touches the disk"),
-    ("imprecise", FLAGGED, "sigma > max_sigma"),
     ("merged", FLAGGED, "the blob touches a neighbour's without a dark gap, or a bright bridge joins them"),
     ("conflict", FLAGGED, "another marker took this marker's blob"),
     ("low_score", LOST, "score < lost_score, or no positive mass"),
@@ -78,15 +78,15 @@ def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, si
             continue
         sc = S[i]
         ms = mass[i]
-        cond[i, 0] = sc < par[0]
-        cond[i, 1] = ms < par[2] * mass0[i]
-        cond[i, 2] = np.isfinite(par[3]) and ms > par[3] * mass_ref[i]
-        cond[i, 3] = np.isfinite(par[4]) and sc < score_ref[i] - par[4]
-        cond[i, 4] = SEC[i] >= sc - par[5]
+        cond[i, 0] = imprecise[i]
+        cond[i, 1] = sc < par[0]
+        cond[i, 2] = ms < par[2] * mass0[i]
+        cond[i, 3] = np.isfinite(par[3]) and ms > par[3] * mass_ref[i]
+        cond[i, 4] = np.isfinite(par[4]) and sc < score_ref[i] - par[4]
+        cond[i, 5] = SEC[i] >= sc - par[5]
         lim = max(par[6], 4.0 * sigma[i] + 2.0 * (gap[i] - 1))
-        cond[i, 5] = nh[i] >= 3 and resid[i] > lim
-        cond[i, 6] = foreign[i]
-        cond[i, 7] = imprecise[i]
+        cond[i, 6] = nh[i] >= 3 and resid[i] > lim
+        cond[i, 7] = foreign[i]
         # blobs touching a neighbour's (matched, or predicted if tracked last frame)
         touch = False
         xi = XP[i] if not np.isnan(XP[i]) else (prx[i] if inside[i] and gap[i] == 1 else np.nan)
@@ -117,6 +117,7 @@ def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sig
         d[j2 < 0] = np.inf
         touch = (d < rb[:, None] + rb[j] + 1.0).any(1)
         c = np.column_stack([
+            imprecise,
             S < par[0],
             mass < par[2] * mass0,
             np.isfinite(par[3]) & (mass > par[3] * mass_ref),
@@ -124,7 +125,6 @@ def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sig
             SEC >= S - par[5],
             (nh >= 3) & (resid > lim),
             foreign,
-            imprecise,
             (touch & ~(valley < par[7])) | (valley > par[8]),
             lose,
             ((S < par[1]) | ~(mass > 0)) & ~lose,

@@ -15,7 +15,7 @@ from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
 from .predict import start_frame, update_model
 from .reacquire import ReacquireStage
-from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine, _refine_all_kernel
+from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _contrast, _refine, _refine_all_kernel
 from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
 from .templates import TemplateStage
 
@@ -111,7 +111,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             ya, xa = max(ly - 2, 0), max(lx - 2, 0)
             kk = int(np.argmax(near))
             py_, px_ = ya + kk // near.shape[1], xa + kk % near.shape[1]
-            lab, _ = ndimage.label(sig > 0.5 * peak)
+            # the blob: above half its contrast (not half a specular highlight's peak)
+            con = float(_contrast(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
+                                  np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
+            lab, _ = ndimage.label(sig > 0.5 * min(con, peak))
             comp = lab == lab[py_, px_]
             area = float(comp.sum())
             r = math.sqrt(area / math.pi)
@@ -497,14 +500,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
     def _update(self, frame, t, res, direction, ctx):
         """Feed the motion model, update templates, re-acquire lost markers, write row t.
 
-        Reliable points feed the motion model (and edge points), and those flagged for
-        their precision only (merged, foreign, imprecise) if they moved like their
+        Reliable points feed the motion model (and edge and imprecise points), and those
+        flagged for what may touch their identity (merged, foreign) if they moved like their
         neighbours: a marker next to another or in glare keeps being followed instead of
         coasting, but not onto a neighbour's or an unpicked marker's blob."""
         p = self.p
         X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
-        rel = (ST == OK) | ((ST == FLAGGED) & (RS == _R["edge"]))
-        soft = ((ST == FLAGGED) & _IS_SOFT[RS]).nonzero()[0]
+        # an imprecise point passed every identity rule (they override it): only its
+        # position is uncertain, and the motion model, which weighs it by its residual,
+        # follows it - a whole sheet of faint dots would otherwise coast until lost
+        rel = (ST == OK) | ((ST == FLAGGED) & ((RS == _R["edge"]) | (RS == _R["imprecise"])))
+        soft = ((ST == FLAGGED) & _IS_SOFT[RS] & ~rel).nonzero()[0]
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
         if ctx.glitch or ctx.aged < 0:
