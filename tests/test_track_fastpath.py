@@ -68,8 +68,9 @@ def test_hard_wing_identical(hard, camera):
     slow, fast, counts = _track_both(hard.frames(camera), hard.picks(camera), camera=camera)
     _assert_identical(slow, fast)
     assert counts.get("handled", 0) > 0, counts
-    # a sequence with events (frame 1's wide search aside) that the Python step handled
-    assert sum(v for k, v in counts.items() if k not in ("handled", "edge_or_wide")) >= 2, counts
+    # a sequence with flags, and events (besides frame 1's wide search) the Python step handled
+    assert (fast.status == "flagged").any()
+    assert sum(v for k, v in counts.items() if k != "handled") >= 2, counts
 
 
 def test_backward_pass_identical(clean):

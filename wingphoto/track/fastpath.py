@@ -52,6 +52,7 @@ BAIL_REASONS = ("handled", "frame_check", "lost_marker", "edge_or_wide", "search
 #: Frames per :data:`BAIL_REASONS` code since the import (or the last :func:`reset_stats`).
 stats = np.zeros(len(BAIL_REASONS), np.int64)
 _JUMP = _R["jump"]
+_IMPRECISE = _R["imprecise"]
 
 #: Modules whose kernels :func:`_fast_frame` calls (their source is part of its cache key).
 _DEPENDENCIES = ("geometry", "predict", "match", "refine", "status")
@@ -330,12 +331,15 @@ def _build(key):
                 return 9
             if ST[i] == OK and (abs(t - last_ok[i]) > 1 or nh[i] < 3) and not stay:
                 return 9
-            if ST[i] == FLAGGED and is_soft[RS[i]]:
-                return 10  # Tracker._update checks it against its neighbours
-        # ---- easy: commit (Tracker._update)
+        # ---- Tracker._update: reliable points (ok; flagged imprecise only: every identity
+        # rule passed) feed the motion model; other soft flags are checked against the
+        # neighbours in Python
         rel = np.empty(n, np.bool_)
         for i in range(n):
-            rel[i] = ST[i] == OK
+            rel[i] = ST[i] == OK or (ST[i] == FLAGGED and RS[i] == _IMPRECISE)
+            if ST[i] == FLAGGED and is_soft[RS[i]] and not rel[i]:
+                return 10
+        # ---- easy: commit
         _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, rrms, last_score, last_ok, mass_ref, score_ref,
                         last_upd, upd_par, upd)
         for i in range(n):
