@@ -47,7 +47,7 @@ def _assert_identical(slow, fast):
 
 @pytest.fixture(scope="module")
 def clean():
-    return synth.render_flapping(n_frames=40, preset="clean", seed=0)
+    return synth.render_flapping(n_frames=30, preset="clean", seed=0)
 
 
 @pytest.fixture(scope="module")
@@ -74,15 +74,15 @@ def test_hard_wing_identical(hard, camera):
 
 
 def test_backward_pass_identical(clean):
-    frames = clean.frames("left")[:24]
+    frames = clean.frames("left")[:20]
     slow, fast, counts = _track_both(frames, clean.picks("left"), bidirectional=True)
     _assert_identical(slow, fast)
-    assert counts.get("handled", 0) >= 30, counts  # both passes
+    assert counts.get("handled", 0) >= 24, counts  # both passes
 
 
 @pytest.mark.parametrize("name", ["dropped_frames", "repeated_frames", "bumped_camera", "black_frame"])
 def test_glitched_scenarios_identical(name):
-    seq = scenarios.render_scenario(name, seed=scenarios.DEV_SEEDS[0], n_frames=24)
+    seq = scenarios.render_scenario(name, seed=scenarios.DEV_SEEDS[0], n_frames=20)
     slow, fast, counts = _track_both(seq.frames("left"), seq.picks("left"))
     _assert_identical(slow, fast)
     assert counts.get("handled", 0) > 0, counts
