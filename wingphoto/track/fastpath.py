@@ -70,21 +70,13 @@ def _dependency_key():
 def _build(key):
     """Compile :func:`_fast_frame` for the stage kernels whose sources hash to ``key``."""
 
-    def _fast_frame(frame, prev, has_prev, sample, t, hx, ht, nh, rrms, lostflag, last_ok, last_score, stagger, h,
-                    rb, W, H, max_coast, every, search_radius, tz, rd, sign, noise, mass0, mass_ref, score_ref, peak0,
-                    last_upd, rule_par, upd_par, fpar, is_soft, rule_status, rule_reason, res_x, res_y, res_score,
-                    res_xpix, res_ypix, res_status, res_reason, res_sigma, pos, upd):
-        """One steady frame of :meth:`Tracker.step` (see the module docstring).
-
-        ``fpar``: min_mass_ratio, min_score, max_sigma, the squared sigma floor, the gains of
-        sigma's noise, background, match and shape terms, _FADED, _WEAK,
-        _BG_RESIDUAL_FADED, _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
-        handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
-        positions, ``upd`` the templates to update), else the code of
-        :data:`BAIL_REASONS` that sent it back, nothing changed.
-        """
+    def _frame(frame, prev, has_prev, sample, t, hx, ht, nh, rrms, lostflag, last_ok, last_score, stagger, h,
+               rb, W, H, max_coast, every, search_radius, tz, rd, sign, noise, mass0, mass_ref, score_ref, peak0,
+               last_upd, rule_par, upd_par, fpar, is_soft, rule_status, rule_reason, res_x, res_y, res_score,
+               res_xpix, res_ypix, res_status, res_reason, res_sigma, pos, upd):
+        """The work of :func:`_fast_frame` (same arguments but ``stats``; its code, uncounted)."""
         if key < 0:  # (never: ties the compiled code to the stage kernels' sources)
-            return -1
+            return 11
         n = h.shape[0]
         if n == 0:
             return 11
@@ -355,6 +347,39 @@ def _build(key):
             pos[i, 1] = Y[i]
         return 0
 
+    # (a module global, not a closure cell: numba's cache key pickles the cells, and a
+    # compiled function pickles differently in every process)
+    global _frame_work
+    _frame_work = engine.jit(_frame)
+
+    def _fast_frame(frame, prev, has_prev, sample, t, hx, ht, nh, rrms, lostflag, last_ok, last_score, stagger, h,
+                    rb, W, H, max_coast, every, search_radius, tz, rd, sign, noise, mass0, mass_ref, score_ref, peak0,
+                    last_upd, rule_par, upd_par, fpar, is_soft, rule_status, rule_reason, res_x, res_y, res_score,
+                    res_xpix, res_ypix, res_status, res_reason, res_sigma, pos, upd, stats):
+        """One steady frame of :meth:`Tracker.step` (see the module docstring).
+
+        ``fpar``: min_mass_ratio, min_score, max_sigma, the squared sigma floor, the gains of
+        sigma's noise, background, match and shape terms, _FADED, _WEAK,
+        _BG_RESIDUAL_FADED, _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
+        handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
+        positions), -1 when it was handled and templates are due for an update (``upd``),
+        else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
+        the outcome in ``stats``.
+        """
+        if key < 0:  # (never: ties the compiled code to the stage kernels' sources)
+            return 11
+        code = _frame_work(frame, prev, has_prev, sample, t, hx, ht, nh, rrms, lostflag, last_ok, last_score,
+                           stagger, h, rb, W, H, max_coast, every, search_radius, tz, rd, sign, noise, mass0,
+                           mass_ref, score_ref, peak0, last_upd, rule_par, upd_par, fpar, is_soft, rule_status,
+                           rule_reason, res_x, res_y, res_score, res_xpix, res_ypix, res_status, res_reason,
+                           res_sigma, pos, upd)
+        stats[code] += 1
+        if code == 0:
+            for i in range(upd.shape[0]):
+                if upd[i]:
+                    return -1
+        return code
+
     return engine.jit(_fast_frame)
 
 
@@ -410,11 +435,10 @@ def fast_step(tr, frame, t, res):
                        c["p"].max_coast, c["p"].search_every, c["p"].search_radius, tr.tz, tr.rd, tr.sign64, tr.noise,
                        tr.mass0, tr.mass_ref, tr.score_ref, tr.peak0, tr.last_upd, c["rule_par"], c["upd_par"],
                        c["fpar"], _IS_SOFT, _RULE_STATUS, _RULE_REASON, res.x, res.y, res.score, res.xpix, res.ypix,
-                       res.status, res.reason, res.sigma, pos, upd)
-    stats[code] += 1
-    if code:
+                       res.status, res.reason, res.sigma, pos, upd, stats)
+    if code > 0:
         return False
-    if upd.any():
+    if code < 0:
         tr._refresh_templates(frame, t, pos[:, 0], pos[:, 1], upd)
     tr.pos = pos
     tr._aged = 0
