@@ -86,6 +86,21 @@ def test_late_markers_are_ok_both_ways_with_bidirectional(seq):
     assert (status[:, frame_of == K] == "ok").all() and (status[:, 2] == "ok").all()
 
 
+def test_markers_of_different_pick_frames_on_one_blob_are_flagged(seq):
+    frames, truth = seq
+    picks = _picks(truth, np.zeros(truth.shape[1], int))
+    # point 8: a second click on marker 3's disc, made in frame K (a mistake, or the
+    # marker it was meant for hidden): its group's tracker cannot see point 3's
+    j = truth[K, 3]
+    picks.loc[len(picks)] = [8, K, np.rint(j[0]), np.rint(j[1])]
+    tr = track_markers(frames, picks, progress=False)
+    both = tr[tr.point.isin([3, 8])]
+    assert not (both.status == "ok").any()
+    assert (both[both.frame != K].reason == "conflict").all()
+    others = tr[~tr.point.isin([3, 8])]
+    assert (others.status == "ok").all()
+
+
 # --------------------------------------------------------------------------- checkpoints
 @pytest.fixture(scope="module")
 def several(seq):

@@ -17,10 +17,14 @@ from .checkpoint import (
 from .inputs import _Frames, _parse_picks
 from .options import TrackOptions
 from .results import _merge_backward, _Results, _tracks_frame
-from .status import _R, FLAGGED, OK
+from .status import _R, FLAGGED, LOST, OK
 from .tracker import Tracker as _Tracker
 
 logger = logging.getLogger("wingphoto.track")
+
+#: Two markers of different pick-frame groups closer than this (px) on one frame are on one
+#: blob: their ok positions are flagged ``conflict`` (as :func:`retrack_from`'s ``conflict_px``).
+GROUP_CONFLICT_PX = 3.0
 
 
 def _resolve_options(options, **given):
@@ -354,7 +358,32 @@ class _Run:
                     _merge_backward(res.rows(low), self.ver[g].rows(low), self.p.fb_tolerance)
             for name in _Results.names + ("status", "reason"):
                 getattr(out, name)[:, sel] = getattr(res, name)
+        _flag_across_groups(out, self.sel)
         return out
+
+
+def _flag_across_groups(res, groups, tol=GROUP_CONFLICT_PX):
+    """Flag ``conflict`` where markers of different groups sit on one blob.
+
+    The groups' trackers do not see each other, so the tracker's own rule (two points
+    never claim one blob) cannot act between them: an ok position within ``tol`` px of a
+    position of another group's marker on the same frame is flagged (both, when both were
+    ok: which one is right is not known).
+    """
+    if len(groups) < 2:
+        return
+    has = np.isfinite(res.x) & (res.status != LOST)
+    hit = np.zeros(res.x.shape, bool)
+    for a in range(len(groups)):
+        for b in range(a + 1, len(groups)):
+            for i in groups[a]:
+                for j in groups[b]:
+                    close = has[:, i] & has[:, j] & (np.hypot(res.x[:, i] - res.x[:, j], res.y[:, i] - res.y[:, j]) < tol)
+                    hit[:, i] |= close
+                    hit[:, j] |= close
+    hit &= res.status == OK
+    res.status[hit] = FLAGGED
+    res.reason[hit] = _R["conflict"]
 
 
 def _copy_row(dst, src, t):
