@@ -13,7 +13,10 @@
   no linking), ``diameter`` the odd size just above the marker diameter;
 * ``track_markers`` on a realistic wing render (:func:`wingphoto.synth.render_flapping`:
   perspective, shading, 26 markers; one wing beat cycled to 1000 frames) next to the disc
-  row, with the ratio of the two (wall clock and CPU time).
+  row, with the ratio of the two (wall clock and CPU time), and the same run with the
+  compiled fast frame off (``engine.try_fast_frames(False)``: every frame stage by stage,
+  :mod:`wingphoto.track.fastpath`); the notes give the share of frames the fast frame
+  handled.
 
 Every run prints the library versions (Python, numpy, numba, OpenCV), the CPU count and
 the load average with the figures: on a shared machine compare the CPU-time column.
@@ -24,7 +27,8 @@ Ratios are against ``track_thesis``. Then the peak memory (``tracemalloc``) of
 ``track_markers`` on lazily produced sequences of growing length shows that frames are
 streamed: what grows is only the result table (~0.5 kB per frame for 30 markers).
 
-The target of issue 4 is >= 3000 frames/s per camera (the cameras' own rate). Timings
+The target (issues 4 and 8) is >= 3000 frames/s per camera (the cameras' own rate) on
+the realistic wing render. Timings
 depend on the machine and its load: the script prints the CPU count and load average.
 
 ``python benchmarks/track_bench.py --sweep [--sweep-args ...]`` runs the validation sweep
@@ -151,6 +155,17 @@ def _rate_without_numba(frames, repeat):
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def _fast_share():
+    """Share of the frames since the last reset that the compiled fast frame handled."""
+    import wingphoto.track as wt
+
+    if not wt.engine.use_fast_frames():
+        return "fast frame not in use"
+    s = wt.fastpath.stats.copy()
+    wt.fastpath.reset_stats()
+    return f"fast frame {s[0] / max(s.sum(), 1):.1%} of frames" if s.sum() else "fast frame not in use"
+
+
 def versions():
     """One line: the libraries and machine every figure depends on."""
     import platform
@@ -216,6 +231,7 @@ def main(argv=None):
 
     rows = []
     track_markers(CycledFrames(block, 5), picks, progress=False)  # warm-up (imports, caches)
+    wt.fastpath.reset_stats()
     (dt, cpu), tr = timed(lambda: track_markers(frames, picks, progress=False), args.repeat)
     err = np.hypot(tr.x.to_numpy().reshape(T, -1) - np.tile(truth, (T // period + 1, 1, 1))[:T, :, 0],
                    tr.y.to_numpy().reshape(T, -1) - np.tile(truth, (T // period + 1, 1, 1))[:T, :, 1])
@@ -223,7 +239,8 @@ def main(argv=None):
     rows.append((f"track_markers ({T} frames)", T / dt, T / cpu,
                  f"ok {ok.mean():.3f}, RMS {np.sqrt(np.mean(err[ok] ** 2)):.3f} px"))
     (dt, cpu), _ = timed(lambda: track_markers(CycledFrames(block, 1000), picks, progress=False), args.repeat)
-    rows.append(("track_markers (1000 frames)", 1000 / dt, 1000 / cpu, "the start (~15 ms) spread over more frames"))
+    rows.append(("track_markers (1000 frames)", 1000 / dt, 1000 / cpu,
+                 f"the start (~15 ms) spread over more frames; {_fast_share()}"))
     disc = rows[-1]
     # a realistic wing: wingphoto.synth.render_flapping (perspective, shading, ~26 markers),
     # one wing beat rendered and cycled to 1000 frames
@@ -233,11 +250,22 @@ def main(argv=None):
     wblock = wing.frames("left")
     wpicks = wing.picks("left")
     track_markers(CycledFrames(wblock, 5), wpicks, progress=False)
+    wt.fastpath.reset_stats()
     (dt, cpu), wtr = timed(lambda: track_markers(CycledFrames(wblock, 1000), wpicks, progress=False), args.repeat)
     nw = int(np.isfinite(wpicks[:, 0]).sum())
     rows.append((f"track_markers (wing render, 1000)", 1000 / dt, 1000 / cpu,
                  f"{nw} markers, {wblock.shape[1]}x{wblock.shape[2]}; ok {np.mean(wtr.status == 'ok'):.3f}; "
-                 f"wall {1000 / dt / disc[1]:.2f}x, CPU {1000 / cpu / disc[2]:.2f}x the disc row"))
+                 f"wall {1000 / dt / disc[1]:.2f}x, CPU {1000 / cpu / disc[2]:.2f}x the disc row; "
+                 f"{_fast_share()}"))
+    if wt.engine.use_fast_frames():
+        try:
+            wt.engine.try_fast_frames(False)
+            (dt, cpu), _ = timed(lambda: track_markers(CycledFrames(wblock, 1000), wpicks, progress=False),
+                                 args.repeat)
+        finally:
+            wt.engine.try_fast_frames(True)
+        rows.append(("  (wing render, fast frame off)", 1000 / dt, 1000 / cpu,
+                     "every frame stage by stage (the tracks are identical)"))
     if wt.engine.use_numba():
         rows.append(("track_markers (no numba)", _rate_without_numba(T, args.repeat), np.nan,
                      "numpy/OpenCV code only (WINGPHOTO_NO_NUMBA=1)"))

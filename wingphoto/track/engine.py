@@ -20,6 +20,7 @@ except ImportError:  # pragma: no cover
 #: True when numba could be imported (the kernels are compiled).
 NUMBA_AVAILABLE = _numba is not None
 _enabled = NUMBA_AVAILABLE
+_fast_frames = True
 
 
 def jit(fn=None, **kw):
@@ -55,3 +56,31 @@ def try_numba(enable=True):
     global _enabled
     _enabled = bool(enable) and NUMBA_AVAILABLE
     return _enabled
+
+
+def use_fast_frames():
+    """True when steady frames are to run through the compiled fast frame
+    (:mod:`wingphoto.track.fastpath`): the compiled kernels are in use and
+    :func:`try_fast_frames` did not turn it off."""
+    return _enabled and _fast_frames
+
+
+def try_fast_frames(enable=True):
+    """Run steady frames through the compiled fast frame (default with numba) or always
+    through the stage-by-stage :meth:`~wingphoto.track.tracker.Tracker.step`.
+
+    The tracks are identical either way (``tests/test_track_fastpath.py``); this switch
+    is for that test and for profiling the stages.
+
+    Parameters
+    ----------
+    enable : bool
+
+    Returns
+    -------
+    bool
+        Whether the fast frame is now in use (it needs the compiled kernels).
+    """
+    global _fast_frames
+    _fast_frames = bool(enable)
+    return use_fast_frames()

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..motion import estimate_shift, frame_content
 from . import engine
+from .fastpath import fast_step
 from .geometry import _nearest_two
 from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
@@ -241,6 +242,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         template update and the re-acquisition of lost markers (:meth:`_update`). What
         one frame computes travels in a context object (``ctx``), not in the tracker.
         """
+        if fast_step(self, frame, t, res):
+            return  # a steady frame, handled end to end by the compiled fast frame
         if not self._frame_glitch(frame, t, res, direction):
             self._aged = 0
             ctx = self._solve(frame, t)
@@ -526,12 +529,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                            self.resid_rms, self.last_score, self.last_ok, self.mass_ref, self.score_ref,
                            self.last_upd, np.array([p.update_score, p.refresh_below, p.update_every], np.float64))
         if upd.any():
-            lam = p.update_rate
-            for i in upd.nonzero()[0].tolist():
-                cut = self._cut(frame, X[i], Y[i], self.h[i])
-                self.tplr[i] = (1.0 - lam) * self.tplr[i] + lam * cut
-                self._set_template(i)
-                self.last_upd[i] = t
+            self._refresh_templates(frame, t, X, Y, upd)
         if self.lostflag.any() and not ctx.glitch:
             self._reacquire(frame, t, res, direction, X, Y, S, ctx.XP, ctx.YP, ST, RS, ctx.pred)
         res.x[t], res.y[t], res.score[t] = X, Y, S
@@ -539,6 +537,15 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         res.status[t], res.reason[t] = ST, RS
         res.sigma[t] = np.where(np.isfinite(X), ctx.sigma, np.nan)
         self.pos = np.column_stack([X, Y])
+
+    def _refresh_templates(self, frame, t, X, Y, upd):
+        """Blend the patches at (X, Y) into the templates of markers ``upd`` (bool)."""
+        lam = self.p.update_rate
+        for i in upd.nonzero()[0].tolist():
+            cut = self._cut(frame, X[i], Y[i], self.h[i])
+            self.tplr[i] = (1.0 - lam) * self.tplr[i] + lam * cut
+            self._set_template(i)
+            self.last_upd[i] = t
 
     def _neighbours(self, x, y, valid):
         """Two nearest valid other markers (indices, -1 none) and distances (inf none)."""
