@@ -80,7 +80,7 @@ def test_backward_pass_identical(clean):
     assert counts.get("handled", 0) >= 24, counts  # both passes
 
 
-@pytest.mark.parametrize("name", ["dropped_frames", "repeated_frames", "bumped_camera", "black_frame"])
+@pytest.mark.parametrize("name", ["dropped_frames", "repeated_frames", "bumped_camera", "black_frame", "enter_leave"])
 def test_glitched_scenarios_identical(name):
     seq = scenarios.render_scenario(name, seed=scenarios.DEV_SEEDS[0], n_frames=20)
     slow, fast, counts = _track_both(seq.frames("left"), seq.picks("left"))

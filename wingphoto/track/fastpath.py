@@ -16,9 +16,11 @@ The kernel decides at the end whether the frame was easy; only then does it comm
 tracker's state and write the frame's row. Otherwise it leaves the state as it was and
 the Python :meth:`Tracker.step` runs (it is the numpy twin of this kernel, and what
 handles every event: a wide or re-search, a conflict, a foreign blob, a jump to vouch
-for, a soft flag to check against the neighbours, a lost, edge or coasting marker, a
-broken constellation, a blank or repeated frame). Due template updates are done in
-Python after the kernel (a few per hundred frames).
+for, a soft flag to check against the neighbours, a lost marker (re-acquisition), a
+broken constellation, a blank or repeated frame). Markers at the image edge (window
+clipped) and tracked markers predicted outside the image are handled here, as the
+Python step does. Due template updates are done in Python after the kernel (a few per
+hundred frames).
 
 The part of :meth:`Tracker.step` that is Python there is mirrored here line for line:
 ``_frame_glitch`` (its cheap test), ``_solve``, ``_conflicts``, ``_consistent``,
@@ -47,12 +49,14 @@ from .status import _IS_SOFT, _R, _RULE_REASON, _RULE_STATUS, FLAGGED, LOST, N_R
 __all__ = ["fast_step", "BAIL_REASONS", "stats", "reset_stats", "summary"]
 
 #: Why a frame left the fast path (index = the kernel's return code; 0: handled).
-BAIL_REASONS = ("handled", "frame_check", "lost_marker", "edge_or_wide", "search", "conflict", "foreign",
+BAIL_REASONS = ("handled", "frame_check", "lost_marker", "wide_search", "search", "conflict", "foreign",
                 "fast_path_check", "constellation", "jump_or_vouch", "soft_flag", "no_markers")
 #: Frames per :data:`BAIL_REASONS` code since the import (or the last :func:`reset_stats`).
 stats = np.zeros(len(BAIL_REASONS), np.int64)
 _JUMP = _R["jump"]
 _IMPRECISE = _R["imprecise"]
+_EDGE = _R["edge"]
+_OUT_OF_FRAME = _R["out_of_frame"]
 
 #: Modules whose kernels :func:`_fast_frame` calls (their source is part of its cache key).
 _DEPENDENCIES = ("geometry", "predict", "match", "refine", "status")
@@ -123,9 +127,9 @@ def _build(key):
         for i in range(n):
             if lostflag[i]:
                 return 2  # (_pre_kernel's mark is the one Python's step makes again)
-            if not fits[i] or wide[i]:
+            if wide[i]:
                 return 3
-            if not F[i]:
+            if fits[i] and not F[i]:
                 ns += 1
                 if r[i] > 3:
                     nw += 1
@@ -141,7 +145,7 @@ def _build(key):
         sidx = np.empty(ns, np.int64)
         k = 0
         for i in range(n):
-            if not F[i]:
+            if fits[i] and not F[i]:
                 sidx[k] = i
                 k += 1
         nc = ns - nw
@@ -227,12 +231,20 @@ def _build(key):
                     q = max(max(rb[i], rb[j]), 2.0)
                     if dx * dx + dy * dy < q * q:
                         return 5
+        nr = 0
         for i in range(n):
-            if F[i]:
+            if F[i] or (inside[i] and not fits[i]):  # (an edge marker: refined at its prediction)
                 XP[i] = np.rint(prx[i])
                 YP[i] = np.rint(pry[i])
-        # ---- sub-pixel refinement of every marker, jointly (Tracker._refine_all)
-        idx = np.arange(n)
+            if not np.isnan(XP[i]):
+                nr += 1
+        # ---- sub-pixel refinement of every matched marker, jointly (Tracker._refine_all)
+        idx = np.empty(nr, np.int64)
+        k = 0
+        for i in range(n):
+            if not np.isnan(XP[i]):
+                idx[k] = i
+                k += 1
         X = np.full(n, np.nan)
         Y = np.full(n, np.nan)
         mass = np.full(n, np.nan)
@@ -248,8 +260,14 @@ def _build(key):
         for i in range(n):
             if foreign[i]:
                 return 6
+            if inside[i] and not fits[i]:
+                XP[i] = np.nan  # (no correlation match for an edge marker)
+                YP[i] = np.nan
         # ---- verification of the fast-path markers (Tracker._solve)
-        nf = n - ns
+        nf = 0
+        for i in range(n):
+            if F[i]:
+                nf += 1
         if nf:
             fidx = np.empty(nf, np.int64)
             k = 0
@@ -295,7 +313,10 @@ def _build(key):
         for i in range(n):
             s_noise = fpar[4] * noise[i] * spread[i]
             s_bg = fpar[5] * bgres[i] * peak[i] * spread[i]
-            s_match = fpar[6] * min(max(1.0 - S[i], 0.0), 1.0) * rb[i]
+            m = 1.0 - S[i]  # (NaN for an edge marker, as np.clip gives)
+            if not np.isnan(m):
+                m = min(max(m, 0.0), 1.0)
+            s_match = fpar[6] * m * rb[i]
             s_shape = fpar[7] * dshape[i]
             sig[i] = np.sqrt(fpar[3] + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
             faded = (peak[i] < fpar[8] * peak0[i]) or (S[i] < fpar[9])
@@ -304,9 +325,14 @@ def _build(key):
         cond = np.empty((n, rule_status.shape[0]), np.bool_)
         _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, rrms, gap, nh, foreign, imprecise,
                            XP, YP, prx, pry, inside, j2, rb, valley, lose, rule_par, cond)
-        ST = np.zeros(n, np.int8)
+        ST = np.full(n, LOST, np.int8)
         RS = np.zeros(n, np.int8)
         for i in range(n):
+            if not fits[i]:
+                if not inside[i]:
+                    RS[i] = _OUT_OF_FRAME
+                continue
+            ST[i] = OK
             for k in range(cond.shape[1] - 1, -1, -1):
                 if cond[i, k]:
                     ST[i] = rule_status[k]
@@ -316,19 +342,29 @@ def _build(key):
             # (a wide-search 'ambiguous' cannot occur here: no marker is searched wide)
             stay = (resid[i] < 0.5 and np.hypot(X[i] - hx[i, 0, 0], Y[i] - hx[i, 0, 1]) < 0.5 and S[i] >= 0.95
                     and ST[i] <= FLAGGED and fpar[12] > 0 and ST[i] == OK)
-            if ST[i] == LOST:
+            if fits[i] and ST[i] == LOST:
                 X[i] = np.nan
                 Y[i] = np.nan
             if RS[i] == _JUMP:
                 return 9
             if ST[i] == OK and (abs(t - last_ok[i]) > 1 or nh[i] < 3) and not stay:
                 return 9
+        for i in range(n):
+            if inside[i] and not fits[i]:  # an edge marker (Tracker._judge)
+                if (mass[i] > fpar[0] * mass0[i] and X[i] >= -0.5 and X[i] <= W - 0.5 and Y[i] >= -0.5
+                        and Y[i] <= H - 0.5):
+                    ST[i] = FLAGGED
+                    RS[i] = _EDGE
+                else:
+                    RS[i] = _OUT_OF_FRAME
+                    X[i] = np.nan
+                    Y[i] = np.nan
         # ---- Tracker._update: reliable points (ok; flagged imprecise only: every identity
         # rule passed) feed the motion model; other soft flags are checked against the
         # neighbours in Python
         rel = np.empty(n, np.bool_)
         for i in range(n):
-            rel[i] = ST[i] == OK or (ST[i] == FLAGGED and RS[i] == _IMPRECISE)
+            rel[i] = ST[i] == OK or (ST[i] == FLAGGED and (RS[i] == _IMPRECISE or RS[i] == _EDGE))
             if ST[i] == FLAGGED and is_soft[RS[i]] and not rel[i]:
                 return 10
         # ---- easy: commit
