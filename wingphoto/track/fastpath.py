@@ -44,7 +44,17 @@ from . import engine
 from .match import _analyse_kernel, _climb_kernel, _ncc_kernel, _score_kernel
 from .predict import _history_kernel, _pre_kernel
 from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine_all_kernel
-from .status import _IS_SOFT, _R, _RULE_REASON, _RULE_STATUS, FLAGGED, LOST, N_RULES, OK, _conditions_kernel
+from .sigma import point_sigma
+from .status import (
+    _IS_SOFT,
+    _R,
+    _RULE_REASON,
+    _RULE_STATUS,
+    FLAGGED,
+    LOST,
+    OK,
+    _conditions_kernel,
+)
 
 __all__ = ["fast_step", "BAIL_REASONS", "stats", "reset_stats", "summary"]
 
@@ -59,7 +69,7 @@ _EDGE = _R["edge"]
 _OUT_OF_FRAME = _R["out_of_frame"]
 
 #: Modules whose kernels :func:`_fast_frame` calls (their source is part of its cache key).
-_DEPENDENCIES = ("geometry", "predict", "match", "refine", "status")
+_DEPENDENCIES = ("geometry", "predict", "match", "refine", "sigma", "status")
 
 
 def _dependency_key():
@@ -305,22 +315,15 @@ def _build(key):
                 lim = max(2.0, 4.0 * rrms[i] + 2.0 * (gap[i] - 1))
                 if resid[i] <= lim and S[i] >= fpar[1]:
                     ngood += 1
-        if nchk >= 3 and ngood < fpar[11] * nchk:
+        if nchk >= 3 and ngood < fpar[6] * nchk:
             return 8
         # ---- sigma (Tracker._sigma) and the status rules (Tracker._judge)
         sig = np.empty(n)
         imprecise = np.empty(n, np.bool_)
         for i in range(n):
-            s_noise = fpar[4] * noise[i] * spread[i]
-            s_bg = fpar[5] * bgres[i] * peak[i] * spread[i]
-            m = 1.0 - S[i]  # (NaN for an edge marker, as np.clip gives)
-            if not np.isnan(m):
-                m = min(max(m, 0.0), 1.0)
-            s_match = fpar[6] * m * rb[i]
-            s_shape = fpar[7] * dshape[i]
-            sig[i] = np.sqrt(fpar[3] + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
-            faded = (peak[i] < fpar[8] * peak0[i]) or (S[i] < fpar[9])
-            imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[10])
+            sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i])
+            faded = (peak[i] < fpar[3] * peak0[i]) or (S[i] < fpar[4])
+            imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[5])
         lose = np.zeros(n, np.bool_)
         cond = np.empty((n, rule_status.shape[0]), np.bool_)
         _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, rrms, gap, nh, foreign, imprecise,
@@ -341,7 +344,7 @@ def _build(key):
         for i in range(n):
             # (a wide-search 'ambiguous' cannot occur here: no marker is searched wide)
             stay = (resid[i] < 0.5 and np.hypot(X[i] - hx[i, 0, 0], Y[i] - hx[i, 0, 1]) < 0.5 and S[i] >= 0.95
-                    and ST[i] <= FLAGGED and fpar[12] > 0 and ST[i] == OK)
+                    and ST[i] <= FLAGGED and fpar[7] > 0 and ST[i] == OK)
             if fits[i] and ST[i] == LOST:
                 X[i] = np.nan
                 Y[i] = np.nan
@@ -394,9 +397,8 @@ def _build(key):
                     res_xpix, res_ypix, res_status, res_reason, res_sigma, pos, upd, stats):
         """One steady frame of :meth:`Tracker.step` (see the module docstring).
 
-        ``fpar``: min_mass_ratio, min_score, max_sigma, the squared sigma floor, the gains of
-        sigma's noise, background, match and shape terms, _FADED, _WEAK,
-        _BG_RESIDUAL_FADED, _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
+        ``fpar``: min_mass_ratio, min_score, max_sigma, _FADED, _WEAK, _BG_RESIDUAL_FADED,
+        _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
         handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
         positions), -1 when it was handled and templates are due for an update (``upd``),
         else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
@@ -431,9 +433,8 @@ def _params(tr):
     rule_par = np.array([p.min_score, p.lost_score, p.min_mass_ratio, p.mass_ratio_cap, p.score_drop_cap,
                          p.ambiguity_margin, p.jump_px, _MERGE_VALLEY, _BRIDGE])
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
-    fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._SIGMA_FLOOR ** 2, tk._SIGMA_NOISE,
-                     tk._SIGMA_BACKGROUND, tk._SIGMA_MATCH, tk._SIGMA_SHAPE, tk._FADED, tk._WEAK,
-                     tk._BG_RESIDUAL_FADED, tk._CONSTELLATION, 1.0 if tk._STAY else 0.0])
+    fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._FADED, tk._WEAK, tk._BG_RESIDUAL_FADED,
+                     tk._CONSTELLATION, 1.0 if tk._STAY else 0.0])
     return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=tk._SAMPLE, p=p)
 
 

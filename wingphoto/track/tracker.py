@@ -15,10 +15,17 @@ from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
 from .predict import shift_history, start_frame, update_model
 from .reacquire import ReacquireStage
-from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _contrast, _refine, _refine_all_kernel
+from .refine import (
+    FOREIGN_FRACTION,
+    FOREIGN_NOISE,
+    WEIGHT_FRACTION,
+    _contrast,
+    _refine,
+    _refine_all_kernel,
+)
+from .sigma import sigma_numpy
 from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
 from .templates import TemplateStage
-
 
 logger = logging.getLogger("wingphoto.track")
 
@@ -28,12 +35,6 @@ _SAMPLE = 16
 #: a faded blob (peak below _FADED of its frame-0 peak, or score below _WEAK) on a ring this
 #: far from a plane (fraction of its contrast) is imprecise whatever its sigma
 _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
-#: sigma (see :meth:`Tracker._sigma`): floor (px) and the gains of its terms
-_SIGMA_FLOOR, _SIGMA_NOISE, _SIGMA_BACKGROUND, _SIGMA_MATCH = 0.003, 1.8, 2.76, 0.05
-#: the shape term: _SIGMA_SHAPE times the blob's uneven-brightness pull ``dshape`` (px, see
-#: :data:`~.refine.SHAPE_CLIP`) beyond _SHAPE_FLOOR (what a uniform marker shows from its
-#: pixels and blur alone: median 0.03 px on clean_glare, edge_on, hard_stroke)
-_SIGMA_SHAPE, _SHAPE_FLOOR = 0.5, 0.03
 #: The constellation is broken when fewer than this share of the markers with a velocity
 #: are found where predicted.
 _CONSTELLATION = 0.5
@@ -146,10 +147,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         # better centre for the template and the motion model
         self.pick_moved = ((np.hypot(x - xy[:, 0], y - xy[:, 1]) > 1.5) | info["foreign"]
                            | (info["bgres"] > _BG_RESIDUAL))
-        with np.errstate(invalid="ignore"):
-            self.sigma0 = np.sqrt(_SIGMA_FLOOR ** 2 + (_SIGMA_NOISE * nz * info["spread"]) ** 2
-                                  + (_SIGMA_BACKGROUND * info["bgres"] * info["peak"] * info["spread"]) ** 2
-                                  + (_SIGMA_SHAPE * np.maximum(info["dshape"] - _SHAPE_FLOOR, 0.0)) ** 2)
+        self.sigma0 = sigma_numpy(nz, info["spread"], info["bgres"], info["peak"], 1.0, rb, info["dshape"])
         self.sigma0[self.pick_moved] = np.nan  # the click, kept: its uncertainty is the user's
         x = np.where(self.pick_moved, xy[:, 0], x)
         y = np.where(self.pick_moved, xy[:, 1], y)
@@ -564,30 +562,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
 
 
     def _sigma(self, ctx):
-        """Per-axis 1-sigma uncertainty (px) of each refined position, from the image.
-
-        Independent terms, added in quadrature: the centroid's response to the pixel
-        noise of the marker's neighbourhood and, separately, to the background ring's
-        departure from a plane (glare, an edge, clutter: it enters the disk too), each
-        times the centroid's sensitivity to a unit noise on its weighted pixels
-        (``spread``: it grows as the blob fades or blurs and its weight falls); the
-        match's sharpness (``1 - score``: the blob no longer looks like the marker -
-        foreshortened, merged, partly hidden - times its radius); the pull of the blob's
-        uneven brightness (``dshape``: how far the centre moves when its weights are
-        flattened - texture, a specular highlight - beyond the ~0.03 px a uniform marker
-        shows); and a floor. The noise, background and match gains were fitted by maximum
-        likelihood (radial error, Rayleigh) on the DEV seeds of
-        :mod:`wingphoto.synth.scenarios` and scaled by 1.3; the shape gain was chosen on
-        DEV seed 0 for >= 95 % within 3 sigma with a median error/sigma >= 0.5 per
-        scenario (``docs/tracker.md`` has the measured honesty).
-        """
+        """Per-axis 1-sigma uncertainty (px) of each refined position, from the image
+        (:func:`~.sigma.sigma_numpy`; the terms and their gains are described there)."""
         info = ctx.info
-        with np.errstate(invalid="ignore"):
-            s_noise = _SIGMA_NOISE * self.noise * info["spread"]
-            s_bg = _SIGMA_BACKGROUND * info["bgres"] * info["peak"] * info["spread"]
-            s_match = _SIGMA_MATCH * np.clip(1.0 - ctx.S, 0.0, 1.0) * self.rb
-            s_shape = _SIGMA_SHAPE * np.maximum(info["dshape"] - _SHAPE_FLOOR, 0.0)
-            return np.sqrt(_SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2)
+        return sigma_numpy(self.noise, info["spread"], info["bgres"], info["peak"], ctx.S, self.rb, info["dshape"])
 
     def _rmax(self):
         """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""

@@ -1,0 +1,78 @@
+"""Sigma: the per-axis 1-sigma uncertainty (px) of a refined position, from the image.
+
+Independent terms, added in quadrature: the centroid's response to the pixel noise of
+the marker's neighbourhood and, separately, to the background ring's departure from a
+plane (glare, an edge, clutter: it enters the disk too), each times the centroid's
+sensitivity to a unit noise on its weighted pixels (``spread``: it grows as the blob fades
+or blurs and its weight falls); the match's sharpness (``1 - score``: the blob no longer
+looks like the marker - foreshortened, merged, partly hidden - times its radius); the pull
+of the blob's uneven brightness (``dshape``: how far the centre moves when its weights are
+flattened - texture, a specular highlight - beyond the ~0.03 px a uniform marker shows);
+and a floor. The noise, background and match gains were fitted by maximum likelihood
+(radial error, Rayleigh) on the DEV seeds of :mod:`wingphoto.synth.scenarios` and scaled
+by 1.3; the shape gain was chosen on DEV seed 0 for >= 95 % within 3 sigma with a median
+error/sigma >= 0.5 per scenario (``docs/tracker.md`` has the measured honesty).
+
+The one formula, for both engines: :func:`point_sigma` (compiled, one point; the fast
+frame calls it) and its numpy twin :func:`sigma_numpy` (arrays; ``Tracker._sigma``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .engine import jit
+
+__all__ = ["point_sigma", "sigma_numpy"]
+
+#: floor (px) and the gains of the noise, background and match terms
+SIGMA_FLOOR, SIGMA_NOISE, SIGMA_BACKGROUND, SIGMA_MATCH = 0.003, 1.8, 2.76, 0.05
+#: the shape term: SIGMA_SHAPE times the blob's uneven-brightness pull ``dshape`` (px, see
+#: :data:`~.refine.SHAPE_CLIP`) beyond SHAPE_FLOOR (what a uniform marker shows from its
+#: pixels and blur alone: median 0.03 px on clean_glare, edge_on, hard_stroke)
+SIGMA_SHAPE, SHAPE_FLOOR = 0.5, 0.03
+
+
+@jit
+def point_sigma(noise, spread, bgres, peak, score, rb, dshape):
+    """Compiled sigma (px) of one point; NaN inputs give NaN, as :func:`sigma_numpy`."""
+    s_noise = SIGMA_NOISE * noise * spread
+    s_bg = SIGMA_BACKGROUND * bgres * peak * spread
+    m = 1.0 - score  # (NaN for an edge marker, as np.clip gives)
+    if not np.isnan(m):
+        m = min(max(m, 0.0), 1.0)
+    s_match = SIGMA_MATCH * m * rb
+    s_shape = SIGMA_SHAPE * max(dshape - SHAPE_FLOOR, 0.0) if not np.isnan(dshape) else np.nan
+    return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
+
+
+def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
+    """numpy twin of :func:`point_sigma` (arrays, or scalars broadcast).
+
+    Parameters
+    ----------
+    noise : ndarray
+        Pixel noise of each marker's neighbourhood (grey levels).
+    spread : ndarray
+        The centroid's sensitivity to a unit noise on its weighted pixels (px per grey level).
+    bgres : ndarray
+        The background ring's departure from a plane, as a fraction of the blob's contrast.
+    peak : ndarray
+        The blob's contrast (grey levels).
+    score : ndarray or float
+        The NCC match score (1.0: no match term, as at the picks).
+    rb : ndarray
+        Blob radius (px).
+    dshape : ndarray
+        How far the centre moves when the weights are flattened (px).
+
+    Returns
+    -------
+    ndarray
+        sigma (px), NaN where an input is NaN.
+    """
+    with np.errstate(invalid="ignore"):
+        s_noise = SIGMA_NOISE * noise * spread
+        s_bg = SIGMA_BACKGROUND * bgres * peak * spread
+        s_match = SIGMA_MATCH * np.clip(1.0 - np.asarray(score, float), 0.0, 1.0) * rb
+        s_shape = SIGMA_SHAPE * np.maximum(dshape - SHAPE_FLOOR, 0.0)
+        return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2)
