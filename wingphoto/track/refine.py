@@ -89,6 +89,10 @@ WEIGHT_FRACTION = 0.2
 #: 75 % and RMS 0.026 px instead of 0.047, but 14 confident errors on realdots cam2 DEV
 #: seed 0, faint dots on a noisy sensor, instead of 0).
 CLIP_LEVEL = 1.2
+#: ``dshape`` (the blob's uneven brightness, a term of sigma): how far the centre moves when
+#: the weights are clipped at SHAPE_CLIP of the way from the cut to the face's median
+#: instead (a uniform face, whatever its outline and blur, does not move it).
+SHAPE_CLIP = 0.5
 #: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
 #: CONTRAST_FACE times its face - the median of its disk pixels above CONTRAST_FLOOR of the
 #: peak (and 3 noise sigmas). A small bright highlight on a dim face (real dots: a specular
@@ -192,12 +196,17 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         cut = (wfrac * _contrast(sig, disk, peak, noise))[:, None]
         above = sig > cut
         level = np.full(n, np.inf, np.float32)
+        flat = np.full(n, np.inf, np.float32)
         has = above.any(1)
         if has.any():
-            level[has] = CLIP_LEVEL * np.nanmedian(np.where(above[has], sig[has], np.nan), axis=1)
+            med = np.nanmedian(np.where(above[has], sig[has], np.nan), axis=1)
+            level[has] = CLIP_LEVEL * med
+            flat[has] = cut[has, 0] + SHAPE_CLIP * (med - cut[has, 0])
         wgt = np.maximum(np.minimum(sig, level[:, None]) - cut, np.float32(0.0))
+        wflat = np.maximum(np.minimum(sig, flat[:, None]) - cut, np.float32(0.0))
     else:
         wgt = np.maximum(sig, 0)
+        wflat = wgt
     with np.errstate(invalid="ignore", divide="ignore"):
         d = (wgt @ grid.gxy) / wgt.sum(1)[:, None]
         # the centroid's sensitivity to pixel noise: per-axis std of the centroid for a
@@ -206,12 +215,11 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         ex = grid.gx[None, :] - np.nan_to_num(d[:, 0:1])
         ey = grid.gy[None, :] - np.nan_to_num(d[:, 1:2])
         spread = np.sqrt(0.5 * np.where(supp, ex * ex + ey * ey, 0.0).sum(1)) / wgt.sum(1)
-        # how far the weighted centre is from the centre of the weighted pixels' mask: an
-        # asymmetric blob (texture, a lobe, a highlight) - a bias the noise does not tell
-        nsup = supp.sum(1)
-        mx = np.where(supp, grid.gx[None, :], 0.0).sum(1) / nsup
-        my = np.where(supp, grid.gy[None, :], 0.0).sum(1) / nsup
-        dshape = np.hypot(mx - d[:, 0], my - d[:, 1])
+        # how far the centre moves when the weights are flattened (clipped at SHAPE_CLIP of
+        # the way from the cut to the face's median): the pull of the blob's uneven
+        # brightness (texture, a highlight) - a bias the noise does not tell
+        ds = (wflat @ grid.gxy) / wflat.sum(1)[:, None]
+        dshape = np.hypot(ds[:, 0] - d[:, 0], ds[:, 1] - d[:, 1])
     fx = np.nan_to_num(d[:, 0:1]).astype(np.float32)
     fy = np.nan_to_num(d[:, 1:2]).astype(np.float32)
     frac = np.zeros(n)
@@ -445,6 +453,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     cut = wfrac * _contrast_kernel(du, dv, dval, nd, pa, pb, pc, peak, noise_i, rval, nr) if wfrac > 0 else 0.0
     # the clip level: CLIP_LEVEL times the blob's median value above the cut
     level = np.inf
+    flat = np.inf
     if wfrac > 0:
         nl = 0
         for k in range(nd):
@@ -453,10 +462,13 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 rval[nr + nl] = res  # (scratch: the buffer holds the ring, then room)
                 nl += 1
         if nl > 0:
-            level = CLIP_LEVEL * _median_inplace(rval, nr, nl)
+            med = _median_inplace(rval, nr, nl)
+            level = CLIP_LEVEL * med
+            flat = cut + SHAPE_CLIP * (med - cut)
     mass = 0.0
     sw = swx = swy = 0.0
     nw = su = sv = suu = svv = 0.0
+    fw = fwx = fwy = 0.0
     for k in range(nd):
         res = dval[k] - (pa + pb * du[k] + pc * dv[k])
         mass += res
@@ -470,6 +482,10 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
             sv += dv[k]
             suu += du[k] * du[k]
             svv += dv[k] * dv[k]
+            wf = min(res, flat) - cut
+            fw += wf
+            fwx += wf * du[k]
+            fwy += wf * dv[k]
     sbg = 0.0
     nbg = 0
     for k in range(nr):
@@ -485,7 +501,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     if sw > 0:
         q = suu - 2.0 * dx * su + nw * dx * dx + svv - 2.0 * dy * sv + nw * dy * dy
         spread = np.sqrt(0.5 * max(q, 0.0)) / sw
-        dshape = np.hypot(su / nw - dx, sv / nw - dy)
+        dshape = np.hypot(fwx / fw - dx, fwy / fw - dy) if fw > 0 else 0.0
     # ring outliers not on the known neighbour's blob: how one-sided, how near
     fx = dx if sw > 0 else 0.0
     fy = dy if sw > 0 else 0.0

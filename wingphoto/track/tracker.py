@@ -29,7 +29,11 @@ _SAMPLE = 16
 #: far from a plane (fraction of its contrast) is imprecise whatever its sigma
 _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
 #: sigma (see :meth:`Tracker._sigma`): floor (px) and the gains of its terms
-_SIGMA_FLOOR, _SIGMA_NOISE, _SIGMA_BACKGROUND, _SIGMA_MATCH, _SIGMA_SHAPE = 0.003, 1.8, 2.76, 0.05, 0.03
+_SIGMA_FLOOR, _SIGMA_NOISE, _SIGMA_BACKGROUND, _SIGMA_MATCH = 0.003, 1.8, 2.76, 0.05
+#: the shape term: _SIGMA_SHAPE times the blob's uneven-brightness pull ``dshape`` (px, see
+#: :data:`~.refine.SHAPE_CLIP`) beyond _SHAPE_FLOOR (what a uniform marker shows from its
+#: pixels and blur alone: median 0.03 px on clean_glare, edge_on, hard_stroke)
+_SIGMA_SHAPE, _SHAPE_FLOOR = 0.5, 0.03
 #: The constellation is broken when fewer than this share of the markers with a velocity
 #: are found where predicted.
 _CONSTELLATION = 0.5
@@ -142,7 +146,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         with np.errstate(invalid="ignore"):
             self.sigma0 = np.sqrt(_SIGMA_FLOOR ** 2 + (_SIGMA_NOISE * nz * info["spread"]) ** 2
                                   + (_SIGMA_BACKGROUND * info["bgres"] * info["peak"] * info["spread"]) ** 2
-                                  + (_SIGMA_SHAPE * info["dshape"]) ** 2)
+                                  + (_SIGMA_SHAPE * np.maximum(info["dshape"] - _SHAPE_FLOOR, 0.0)) ** 2)
         self.sigma0[self.pick_moved] = np.nan  # the click, kept: its uncertainty is the user's
         x = np.where(self.pick_moved, xy[:, 0], x)
         y = np.where(self.pick_moved, xy[:, 1], y)
@@ -558,20 +562,21 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         times the centroid's sensitivity to a unit noise on its weighted pixels
         (``spread``: it grows as the blob fades or blurs and its weight falls); the
         match's sharpness (``1 - score``: the blob no longer looks like the marker -
-        foreshortened, merged, partly hidden - times its radius); the blob's asymmetry
-        (the distance between its weighted centre and the centre of its mask: texture,
-        a lobe); and a floor. The gains were fitted by maximum likelihood (radial error,
-        Rayleigh) on the DEV seeds of :mod:`wingphoto.synth.scenarios` and scaled by 1.3:
-        pooled over those scenarios 96 % of the ok points lie within 3 sigma of the truth
-        and the median error/sigma is 0.66 (``docs/tracker.md``; painted and specular
-        markers are under-covered, ~75-80 %).
+        foreshortened, merged, partly hidden - times its radius); the pull of the blob's
+        uneven brightness (``dshape``: how far the centre moves when its weights are
+        flattened - texture, a specular highlight - beyond the ~0.03 px a uniform marker
+        shows); and a floor. The noise, background and match gains were fitted by maximum
+        likelihood (radial error, Rayleigh) on the DEV seeds of
+        :mod:`wingphoto.synth.scenarios` and scaled by 1.3; the shape gain was chosen on
+        DEV seed 0 for >= 95 % within 3 sigma with a median error/sigma >= 0.5 per
+        scenario (``docs/tracker.md`` has the measured honesty).
         """
         info = ctx.info
         with np.errstate(invalid="ignore"):
             s_noise = _SIGMA_NOISE * self.noise * info["spread"]
             s_bg = _SIGMA_BACKGROUND * info["bgres"] * info["peak"] * info["spread"]
             s_match = _SIGMA_MATCH * np.clip(1.0 - ctx.S, 0.0, 1.0) * self.rb
-            s_shape = _SIGMA_SHAPE * info["dshape"]
+            s_shape = _SIGMA_SHAPE * np.maximum(info["dshape"] - _SHAPE_FLOOR, 0.0)
             return np.sqrt(_SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2)
 
     def _rmax(self):
