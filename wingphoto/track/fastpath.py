@@ -317,7 +317,10 @@ def _build(key):
             if not np.isnan(m):
                 m = min(max(m, 0.0), 1.0)
             s_match = fpar[6] * m * rb[i]
-            s_shape = fpar[7] * dshape[i]
+            ds = dshape[i] - fpar[13]  # (the pull beyond a uniform marker's; NaN stays NaN)
+            if not np.isnan(ds):
+                ds = max(ds, 0.0)
+            s_shape = fpar[7] * ds
             sig[i] = np.sqrt(fpar[3] + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
             faded = (peak[i] < fpar[8] * peak0[i]) or (S[i] < fpar[9])
             imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[10])
@@ -396,7 +399,7 @@ def _build(key):
 
         ``fpar``: min_mass_ratio, min_score, max_sigma, the squared sigma floor, the gains of
         sigma's noise, background, match and shape terms, _FADED, _WEAK,
-        _BG_RESIDUAL_FADED, _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
+        _BG_RESIDUAL_FADED, _CONSTELLATION, _STAY (1.0/0.0), _SHAPE_FLOOR. Returns 0 when the frame was
         handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
         positions), -1 when it was handled and templates are due for an update (``upd``),
         else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
@@ -433,7 +436,7 @@ def _params(tr):
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
     fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._SIGMA_FLOOR ** 2, tk._SIGMA_NOISE,
                      tk._SIGMA_BACKGROUND, tk._SIGMA_MATCH, tk._SIGMA_SHAPE, tk._FADED, tk._WEAK,
-                     tk._BG_RESIDUAL_FADED, tk._CONSTELLATION, 1.0 if tk._STAY else 0.0])
+                     tk._BG_RESIDUAL_FADED, tk._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._SHAPE_FLOOR])
     return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=tk._SAMPLE, p=p)
 
 
