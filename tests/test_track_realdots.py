@@ -43,7 +43,9 @@ def test_real_dots_tracked_without_confident_errors():
     # position) through most of the frames where they are visible instead of coasting
     # into lost_track (measured 0.75 at commit e54d535, 0.74 with the shape term of sigma;
     # a shape gain of 1.0 instead of 0.5 gave 20 ok points ~35 px off here: a dot
-    # re-acquired one grid pitch off, then ok when few neighbours were ok to vouch)
+    # re-acquired one grid pitch off, then ok when few neighbours were ok to vouch;
+    # 0.63 since a lost dot is re-predicted only from neighbours that moved like it,
+    # 87fc030, which re-acquires fewer dots and none onto another; ~0.3 before e54d535)
     seq = realdots.render_realdots("cam2", seed=0)
     picks = seq.picks("cam2")
     tr = track_markers(seq.frames("cam2"), picks, camera="cam2", progress=False)
@@ -53,4 +55,4 @@ def test_real_dots_tracked_without_confident_errors():
     assert not (a["error"][ok] > 1.0).any()
     followed = np.isfinite(a["error"]) & a["visible"]
     share = followed.sum() / a["visible"].sum()
-    assert share > 0.65, f"followed share {share:.3f}"
+    assert share > 0.58, f"followed share {share:.3f}"
