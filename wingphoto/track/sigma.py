@@ -8,9 +8,7 @@ or blurs and its weight falls); the match's sharpness (``1 - score``: the blob n
 looks like the marker - foreshortened, merged, partly hidden - times its radius); the pull
 of the blob's uneven brightness (``dshape``: how far the centre moves when its weights are
 flattened - texture, a specular highlight - beyond the ~0.03 px a uniform marker shows);
-the bias of a thin smear unlike the marker (motion blur, edge-on: the blur term, the
-match term's ``1 - score`` times radius scaled by how thin the blob's weights are); and a
-floor. The noise, background and match gains were fitted by maximum likelihood
+and a floor. The noise, background and match gains were fitted by maximum likelihood
 (radial error, Rayleigh) on the DEV seeds of :mod:`wingphoto.synth.scenarios` and scaled
 by 1.3; the shape gain was chosen on DEV seed 0 for >= 95 % within 3 sigma with a median
 error/sigma >= 0.5 per scenario (``docs/tracker.md`` has the measured honesty).
@@ -32,15 +30,6 @@ SIGMA_FLOOR, SIGMA_NOISE, SIGMA_BACKGROUND, SIGMA_MATCH = 0.003, 1.8, 2.76, 0.05
 #: :data:`~.refine.SHAPE_CLIP`) beyond SHAPE_FLOOR (what a uniform marker shows from its
 #: pixels and blur alone: median 0.03 px on clean_glare, edge_on, hard_stroke)
 SIGMA_SHAPE, SHAPE_FLOOR = 0.5, 0.03
-#: the blur term: SIGMA_BLUR times the blob's thinness ``spread * peak`` beyond BLUR_FLOOR
-#: times the match term's ``(1 - score) * radius``. ``spread * peak`` is the centroid's
-#: noise sensitivity in units of the contrast, independent of the radius: ~0.46-0.5 for a
-#: sharp uniform disk (1 / (2 sqrt(pi) (1 - cut)) = 0.35 for a hard edge), ~1-2 for a
-#: motion-blurred or edge-on smear. A blob both thin and unlike the marker is biased
-#: beyond what its noise says (motion_blur and edge_on EXTRA dev seeds 3-11: the ok
-#: points more than 1 px off had sigma 0.16-0.23 px, spread * peak 0.95-1.6, score
-#: 0.62-0.66); chosen on those seeds to turn them imprecise at the least loss of ok points.
-SIGMA_BLUR, BLUR_FLOOR = 0.16, 0.5
 
 
 @jit
@@ -53,10 +42,7 @@ def point_sigma(noise, spread, bgres, peak, score, rb, dshape):
         m = min(max(m, 0.0), 1.0)
     s_match = SIGMA_MATCH * m * rb
     s_shape = SIGMA_SHAPE * max(dshape - SHAPE_FLOOR, 0.0) if not np.isnan(dshape) else np.nan
-    thin = spread * peak - BLUR_FLOOR
-    s_blur = SIGMA_BLUR * (max(thin, 0.0) if not np.isnan(thin) else np.nan) * m * rb
-    return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape
-                   + s_blur * s_blur)
+    return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
 
 
 def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
@@ -87,8 +73,6 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
     with np.errstate(invalid="ignore"):
         s_noise = SIGMA_NOISE * noise * spread
         s_bg = SIGMA_BACKGROUND * bgres * peak * spread
-        m = np.clip(1.0 - np.asarray(score, float), 0.0, 1.0)
-        s_match = SIGMA_MATCH * m * rb
+        s_match = SIGMA_MATCH * np.clip(1.0 - np.asarray(score, float), 0.0, 1.0) * rb
         s_shape = SIGMA_SHAPE * np.maximum(dshape - SHAPE_FLOOR, 0.0)
-        s_blur = SIGMA_BLUR * np.maximum(np.asarray(spread) * peak - BLUR_FLOOR, 0.0) * m * rb
-        return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2 + s_blur ** 2)
+        return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2)
