@@ -81,6 +81,31 @@ def _dependency_key():
     return int(h.hexdigest()[:15], 16)
 
 
+
+@engine.jit
+def _windows(sidx, count, small, h, prx, pry, r):
+    """The ``count`` markers of ``sidx`` with a small window (radius <= 3, ``small``) or a
+    larger one, and their kernel arguments: indices, template half sizes, rounded
+    predictions (x, y) and window radii."""
+    idx = np.empty(count, np.int64)
+    k = 0
+    for i in sidx:
+        if (r[i] <= 3) == small:
+            idx[k] = i
+            k += 1
+    hh = np.empty(count, np.int64)
+    xx = np.empty(count, np.int64)
+    yy = np.empty(count, np.int64)
+    rr = np.empty(count, np.int64)
+    for k in range(count):
+        i = idx[k]
+        hh[k] = h[i]
+        xx[k] = np.int64(np.rint(prx[i]))
+        yy[k] = np.int64(np.rint(pry[i]))
+        rr[k] = r[i]
+    return idx, hh, xx, yy, rr
+
+
 def _build(key):
     """Compile :func:`_fast_frame` for the stage kernels whose sources hash to ``key``."""
 
@@ -160,22 +185,7 @@ def _build(key):
                 k += 1
         nc = ns - nw
         if nc:
-            cidx = np.empty(nc, np.int64)
-            k = 0
-            for i in sidx:
-                if r[i] <= 3:
-                    cidx[k] = i
-                    k += 1
-            ch = np.empty(nc, np.int64)
-            cx = np.empty(nc, np.int64)
-            cy = np.empty(nc, np.int64)
-            cr = np.empty(nc, np.int64)
-            for k in range(nc):
-                i = cidx[k]
-                ch[k] = h[i]
-                cx[k] = np.int64(np.rint(prx[i]))
-                cy[k] = np.int64(np.rint(pry[i]))
-                cr[k] = r[i]
+            cidx, ch, cx, cy, cr = _windows(sidx, nc, True, h, prx, pry, r)
             out = np.empty((nc, 4))
             _climb_kernel(frame, tz, cidx, ch, cx, cy, cr, out)
             for k in range(nc):
@@ -186,26 +196,11 @@ def _build(key):
                 YP[i] = out[k, 1]
                 S[i] = out[k, 2]
         if nw:
-            widx = np.empty(nw, np.int64)
-            k = 0
-            for i in sidx:
-                if r[i] > 3:
-                    widx[k] = i
-                    k += 1
+            widx, wh, wx, wy, wr = _windows(sidx, nw, False, h, prx, pry, r)
             m = 2 * rmax + 1
             maps = np.full((nw, m, m), -2.0, np.float32)
             origin = np.zeros((nw, 2), np.int64)
             shape = np.zeros((nw, 2), np.int64)
-            wh = np.empty(nw, np.int64)
-            wx = np.empty(nw, np.int64)
-            wy = np.empty(nw, np.int64)
-            wr = np.empty(nw, np.int64)
-            for k in range(nw):
-                i = widx[k]
-                wh[k] = h[i]
-                wx[k] = np.int64(np.rint(prx[i]))
-                wy[k] = np.int64(np.rint(pry[i]))
-                wr[k] = r[i]
             _ncc_kernel(frame, tz, widx, wh, wx, wy, wr, maps, origin, shape)
             oth = np.full((nw, 2, 2), np.nan)  # the neighbours' predictions (map cells)
             excl = np.empty(nw)
