@@ -212,3 +212,27 @@ def test_engine_twins_refine(value):
     b = refine._refine_core_fast(*args)
     for u, v in zip(a, b):
         np.testing.assert_allclose(np.asarray(u, float), np.asarray(v, float), rtol=1e-5, atol=1e-5, equal_nan=True)
+
+
+def test_cli_track_bidirectional_flag(tmp_path, monkeypatch):
+    # `wingphoto track --bidirectional` reaches track_markers, and a real run on the sample
+    # with it writes the table (exit 0)
+    from pathlib import Path
+
+    from wingphoto import cli, pipeline
+
+    samples = Path(__file__).resolve().parents[1] / "data-samples" / "flapping"
+    args = ["track", "--frames", str(samples / "left"), "--picks", str(samples / "picks.json"),
+            "--out", str(tmp_path / "t.csv")]
+    seen = {}
+    real = pipeline.track_folder
+
+    def spy(frames, picks, **kw):
+        seen.update(kw)
+        return real(frames, picks, **kw)
+
+    monkeypatch.setattr(pipeline, "track_folder", spy)
+    assert cli.main(args) == 0 and seen["bidirectional"] is False
+    assert cli.main(args + ["--bidirectional"]) == 0 and seen["bidirectional"] is True
+    out = pd.read_csv(tmp_path / "t.csv")
+    assert (out["status"] == "ok").mean() > 0.95

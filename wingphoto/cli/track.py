@@ -23,6 +23,9 @@ def add_parser(sub):
                    help="frames between two checkpoint saves (default 500)")
     t.add_argument("--max-sigma", type=float, default=None, metavar="PX",
                    help="largest positional uncertainty (px) of an ok point (default 0.25)")
+    t.add_argument("--bidirectional", action="store_true",
+                   help="also track backwards and flag points where the two passes disagree (fb_disagree); "
+                        "about twice the time")
     t.add_argument("--force", action="store_true",
                    help="track despite a failed sequence check (duplicated frames, stray files; `wingphoto check`)")
     return t
@@ -48,7 +51,8 @@ def run(args):
     try:
         tracks = pipeline.track_folder(args.frames, args.picks, camera=args.camera, out=args.out,
                                        checkpoint=args.checkpoint, force=getattr(args, "force", False),
-                                       checkpoint_every=args.checkpoint_every, max_sigma=args.max_sigma)
+                                       checkpoint_every=args.checkpoint_every, max_sigma=args.max_sigma,
+                                       bidirectional=getattr(args, "bidirectional", False))
     except KeyboardInterrupt:
         if args.checkpoint:
             print(f"wingphoto track: interrupted; progress saved in {args.checkpoint}: run the same command "
