@@ -93,17 +93,26 @@ def _windows(sidx, count, small, h, prx, pry, r):
         if (r[i] <= 3) == small:
             idx[k] = i
             k += 1
+    hh, xx, yy = _at(idx, h, prx, pry)
+    rr = np.empty(count, np.int64)
+    for k in range(count):
+        rr[k] = r[idx[k]]
+    return idx, hh, xx, yy, rr
+
+
+@engine.jit
+def _at(idx, h, x, y):
+    """Template half sizes and rounded positions (x, y) of markers ``idx`` (kernel arguments)."""
+    count = idx.shape[0]
     hh = np.empty(count, np.int64)
     xx = np.empty(count, np.int64)
     yy = np.empty(count, np.int64)
-    rr = np.empty(count, np.int64)
     for k in range(count):
         i = idx[k]
         hh[k] = h[i]
-        xx[k] = np.int64(np.rint(prx[i]))
-        yy[k] = np.int64(np.rint(pry[i]))
-        rr[k] = r[i]
-    return idx, hh, xx, yy, rr
+        xx[k] = np.int64(np.rint(x[i]))
+        yy[k] = np.int64(np.rint(y[i]))
+    return hh, xx, yy
 
 
 def _build(key):
@@ -280,14 +289,7 @@ def _build(key):
                 if F[i]:
                     fidx[k] = i
                     k += 1
-            fh_ = np.empty(nf, np.int64)
-            fx = np.empty(nf, np.int64)
-            fy = np.empty(nf, np.int64)
-            for k in range(nf):
-                i = fidx[k]
-                fh_[k] = h[i]
-                fx[k] = np.int64(np.rint(X[i]))
-                fy[k] = np.int64(np.rint(Y[i]))
+            fh_, fx, fy = _at(fidx, h, X, Y)
             sc = np.empty(nf)
             _score_kernel(frame, tz, fidx, fh_, fx, fy, sc)
             for k in range(nf):
