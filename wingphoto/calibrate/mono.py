@@ -10,7 +10,7 @@ import numpy as np
 from ..camera import Camera
 from .checks import _MIN_VIEWS, _NOTE, _PM, _check_pattern_size, _check_square_size
 from .model import _Estimate, _camera_from_vector, _covariance, _project, _rodrigues_batch, _solve, _std, _transform
-from .report import _camera_entries, _f, _frozen, _intrinsics_block, _select, _truth_table
+from .report import _camera_entries, _f, _frozen, _intrinsics_block, _rejected_lines, _select, _truth_table
 from .views import _board_list, _gather_views, _image_size_of, _screen_views, _too_few
 
 logger = logging.getLogger(__name__)
@@ -227,8 +227,7 @@ class CameraCalibration:
         if self.corner_correction is not None:
             amp = np.hypot(self.corner_correction[:, 0], self.corner_correction[:, 1])
             lines.append(f"Corner pixel-locking correction: amplitude x {amp[0]:.4f} px, y {amp[1]:.4f} px")
-        for name, why in self.rejected.items():
-            lines.append(f"  rejected {name}: {why}")
+        lines += _rejected_lines(self.rejected)
         return "\n".join(lines)
 
     def __str__(self):

@@ -28,6 +28,11 @@ def _intrinsics_block(cam, unc, s, pm):
     return lines
 
 
+def _rejected_lines(rejected):
+    """One ``  rejected <name>: <why>`` line per rejected view or pair (summary tails)."""
+    return [f"  rejected {name}: {why}" for name, why in rejected.items()]
+
+
 def _select(indices, names, what):
     if indices is None:
         return set()

@@ -12,7 +12,7 @@ from ..camera import StereoRig, rodrigues
 from .checks import _MIN_VIEWS, _NOTE, _PM, _check_pattern_size, _check_square_size
 from .model import _Estimate, _camera_from_vector, _covariance, _intrinsics_vector, _project, _rodrigues_batch, _solve, _std, _transform
 from .mono import CameraCalibration, _calibrate_from_views, _stack
-from .report import _camera_entries, _f, _frozen, _intrinsics_block, _select, _truth_table
+from .report import _camera_entries, _f, _frozen, _intrinsics_block, _rejected_lines, _select, _truth_table
 from .views import _board_list, _gather_views, _image_size_of, _unique_names
 
 logger = logging.getLogger(__name__)
@@ -164,8 +164,7 @@ class StereoCalibration:
         lines.append(f"Pixel error:     err_left = [ {_f(self.pixel_error_left)} ]")
         lines.append(f"Pixel error:    err_right = [ {_f(self.pixel_error_right)} ]")
         lines.append(f"Pairs used: {int(self.used.sum())} of {len(self.pairs)}")
-        for name, why in self.rejected.items():
-            lines.append(f"  rejected {name}: {why}")
+        lines += _rejected_lines(self.rejected)
         return "\n".join(lines)
 
     def __str__(self):
