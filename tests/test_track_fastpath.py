@@ -120,3 +120,24 @@ def test_fast_frame_is_compiled_for_the_stage_kernels_it_calls():
     cells = dict(zip(fastpath._fast_frame.py_func.__code__.co_freevars,
                      (c.cell_contents for c in fastpath._fast_frame.py_func.__closure__)))
     assert cells["key"] == fastpath._dependency_key() > 0
+
+
+def test_kernel_caches_are_cleared_when_a_kernel_module_changes(tmp_path):
+    """numba keys a kernel's cache by its own file: an edit of another kernel module (a
+    callee, a constant) must clear the package's caches, and an unchanged source not."""
+    from wingphoto.track.engine import clear_stale_caches
+
+    (tmp_path / "a.py").write_text("X = 1\n")
+    (tmp_path / "b.py").write_text("Y = 2\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    assert clear_stale_caches(tmp_path, ("a", "b"))  # no stamp yet
+    kernel = cache / "b.kernel-1.py311.1.nbc"
+    kernel.write_bytes(b"compiled")
+    (cache / "b.kernel-1.py311.nbi").write_bytes(b"index")
+    assert not clear_stale_caches(tmp_path, ("a", "b"))
+    assert kernel.exists()
+    (tmp_path / "a.py").write_text("X = 3\n")  # the callee's module changed
+    assert clear_stale_caches(tmp_path, ("a", "b"))
+    assert not kernel.exists() and not list(cache.glob("*.nbi"))
+    assert not clear_stale_caches(tmp_path, ("a", "b"))

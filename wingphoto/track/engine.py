@@ -8,7 +8,9 @@ thing; :func:`jit` compiles the kernel when numba is importable, and every stage
 """
 from __future__ import annotations
 
+import hashlib
 import os
+from pathlib import Path
 
 try:  # pragma: no cover - depends on the environment
     if os.environ.get("WINGPHOTO_NO_NUMBA"):
@@ -19,8 +21,65 @@ except ImportError:  # pragma: no cover
 
 #: True when numba could be imported (the kernels are compiled).
 NUMBA_AVAILABLE = _numba is not None
+#: The modules that hold compiled kernels or constants the kernels read. numba keys a
+#: kernel's cache by its own file only, so a kernel that calls another module's kernel
+#: (predict -> geometry) or reads its constant (refine -> options) would keep running a
+#: stale copy after that module changed; :func:`clear_stale_caches` prevents it.
+KERNEL_MODULES = ("engine", "fastpath", "geometry", "match", "options", "predict", "refine", "sigma", "status")
 _enabled = NUMBA_AVAILABLE
 _fast_frames = True
+
+
+def clear_stale_caches(package_dir=None, modules=KERNEL_MODULES):
+    """Delete numba's in-tree caches of the package when any kernel module's source changed.
+
+    A hash of the sources of ``modules`` is kept beside the caches
+    (``__pycache__/wingphoto-kernels.sha256``); when it differs, every ``*.nbi``/``*.nbc``
+    file there is deleted and the kernels compile afresh (once, ~1 min). Written by hand:
+    numba's own invalidation looks at one file per kernel. A read-only install (no
+    in-tree cache) is left alone.
+
+    Parameters
+    ----------
+    package_dir : path-like, optional
+        The package folder (default: this one).
+    modules : sequence of str
+        Module names (without ``.py``) whose sources make the hash.
+
+    Returns
+    -------
+    bool
+        True when caches were cleared.
+    """
+    here = Path(package_dir) if package_dir is not None else Path(__file__).parent
+    digest = hashlib.sha256()
+    for name in modules:
+        try:
+            digest.update((here / f"{name}.py").read_bytes())
+        except OSError:
+            digest.update(name.encode())
+    key = digest.hexdigest()
+    cache = here / "__pycache__"
+    stamp = cache / "wingphoto-kernels.sha256"
+    try:
+        if stamp.read_text() == key:
+            return False
+    except OSError:
+        pass
+    try:
+        cache.mkdir(exist_ok=True)
+        for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+            f.unlink(missing_ok=True)
+        tmp = stamp.with_name(f"{stamp.name}.{os.getpid()}.tmp")
+        tmp.write_text(key)
+        os.replace(tmp, stamp)
+    except OSError:  # pragma: no cover - a read-only install: numba caches elsewhere
+        return False
+    return True
+
+
+if NUMBA_AVAILABLE:
+    clear_stale_caches()
 
 
 def jit(fn=None, **kw):
