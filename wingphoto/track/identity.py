@@ -26,8 +26,9 @@ class IdentityStage:
     size (``W``, ``H``), the options ``p`` and the rows already written (``res``).
     """
 
-    def _vouch(self, jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t):
-        """Neighbour checks after the status rules.
+    def _vouch(self, jmp, chk, ctx, res, t):
+        """Neighbour checks after the status rules, on ``ctx.ST, ctx.RS`` of markers
+        ``jmp`` (flagged 'jump') and ``chk`` (ok, to be checked).
 
         A 'jump' from the motion model that the neighbours made too (the whole wing, or
         the rigid target between two stills, stopped or turned at once) is none: the
@@ -38,6 +39,7 @@ class IdentityStage:
         restarting, must have moved like its neighbours since it was last ok (without
         neighbours to vouch for it: only close to its own prediction)."""
         p = self.p
+        X, Y, S, SEC, ST, RS, resid = ctx.X, ctx.Y, ctx.S, ctx.SEC, ctx.ST, ctx.RS, ctx.resid
         if jmp.size:
             short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
             ST[short] = OK

@@ -427,7 +427,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         A blank frame's points are lost (reason ``blank``) and the motion model coasts;
         a repeated frame gets the previous frame's rows (the same image: the same
         positions) and the motion model's history moves one frame on, as time did not
-        advance. Returns True when the frame was handled."""
+        advance. Returns True when the frame was handled.
+
+        Reads the previous frame ``_prev``; writes ``pos`` (blank), ``hist_t`` and
+        ``last_ok`` (repeated) and rows ``t`` of ``res``."""
         s = frame[:: _SAMPLE, :: _SAMPLE]
         floating = frame.dtype.kind == "f"
         if not (s.max() > s.min()) or (floating and not np.isfinite(s).all()):
@@ -686,7 +689,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             # static dot next to the moving wing)
             chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
-                self._vouch(jmp, chk, X, Y, S, SEC, ST, RS, ctx.resid, res, t)
+                self._vouch(jmp, chk, ctx, res, t)
         eidx = ctx.eidx
         if eidx.size:
             ex, ey = X[eidx], Y[eidx]
