@@ -23,8 +23,9 @@ Python step does. Due template updates are done in Python after the kernel (a fe
 hundred frames).
 
 The part of :meth:`Tracker.step` that is Python there is mirrored here line for line:
-``_frame_glitch`` (its cheap test), ``_solve``, ``_conflicts``, ``_consistent``,
-``_sigma``, ``_judge`` and ``_update``. Change one and the test
+``_frame_glitch`` (its cheap test), ``_solve`` (``_plan``, ``_match_all``,
+``_refine_matched``, ``_verify_fast``), ``_conflicts``, ``_consistent``, ``_sigma``,
+``_judge`` and ``_update``. Change one and the test
 ``tests/test_track_fastpath.py`` (identical tracks with the fast frame on and off)
 tells whether this mirror must follow.
 
@@ -277,7 +278,7 @@ def _build(key):
             if inside[i] and not fits[i]:
                 XP[i] = np.nan  # (no correlation match for an edge marker)
                 YP[i] = np.nan
-        # ---- verification of the fast-path markers (Tracker._solve)
+        # ---- verification of the fast-path markers (Tracker._verify_fast)
         nf = 0
         for i in range(n):
             if F[i]:
@@ -475,7 +476,6 @@ def fast_step(tr, frame, t, res):
     if code < 0:
         tr._refresh_templates(frame, t, pos[:, 0], pos[:, 1], upd)
     tr.pos = pos
-    tr._aged = 0
     tr._prev2, tr._prev = tr._prev, frame
     return True
 

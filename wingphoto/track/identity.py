@@ -8,35 +8,27 @@ import numpy as np
 from .geometry import _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
-from .options import _BRIDGE, _MERGE_VALLEY
 from .status import _R, FLAGGED, OK
 
 
 class IdentityStage:
-    """Identity checks of :class:`~wingphoto.track.tracker.Tracker`."""
+    """Identity checks of :class:`~wingphoto.track.tracker.Tracker`.
 
-    def _touching(self, XP, YP, prx, pry, gap, inside, info):
-        """Markers whose blob touches another's on this frame (flag 'merged').
+    The correlation search (:meth:`_search`, with the wide search's :meth:`_consensus`),
+    the conflict test (:meth:`_conflicts`) and the neighbour checks after the status rules
+    (:meth:`_vouch`, :meth:`_inconsistent`, :meth:`_neighbours_then`; the re-acquisition
+    uses the last two too). They write only the frame's results - the
+    :class:`~wingphoto.track.tracker.FrameContext` ``ctx`` or the arrays passed in - and
+    read the tracker's state without changing it: the motion model (``hist_x``,
+    ``hist_t``, ``nh``, ``resid_rms``, ``last_ok``, ``lostflag``), the markers' sizes
+    (``h``, ``rb``), the picks' frame's layout (``ref_pos``, ``local``, ``_spacing``), the
+    templates (``tz``, and through :meth:`~.templates.TemplateStage._match`), the image
+    size (``W``, ``H``), the options ``p`` and the rows already written (``res``).
+    """
 
-        Positions are the pixel-level matches, or for a marker without one its prediction
-        if it was tracked on the previous frame (a coasting marker's prediction may have
-        drifted onto a neighbour: it does not make that neighbour 'merged'). Two blobs
-        touch when closer than the sum of their radii + 1 px, unless the image between
-        them falls below ``_MERGE_VALLEY`` of the peak (a visible gap), and whenever it
-        stays above ``_BRIDGE`` of the peak (a bright bridge).
-        """
-        px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
-        py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
-        # the two nearest by prediction are the candidates (the nearest by match is one)
-        j = np.maximum(self._j2, 0)
-        d = np.hypot(px[j] - px[:, None], py[j] - py[:, None])
-        d[self._j2 < 0] = np.inf
-        touch = (d < self.rb[:, None] + self.rb[j] + 1.0).any(1)
-        # (and whatever the radii, a bright bridge to the neighbour is a merge)
-        return (touch & ~(info["valley"] < _MERGE_VALLEY)) | (info["valley"] > _BRIDGE)
-
-    def _vouch(self, jmp, chk, X, Y, S, SEC, ST, RS, resid, res, t):
-        """Neighbour checks after the status rules.
+    def _vouch(self, jmp, chk, ctx, res, t):
+        """Neighbour checks after the status rules, on ``ctx.ST, ctx.RS`` of markers
+        ``jmp`` (flagged 'jump') and ``chk`` (ok, to be checked).
 
         A 'jump' from the motion model that the neighbours made too (the whole wing, or
         the rigid target between two stills, stopped or turned at once) is none: the
@@ -47,6 +39,7 @@ class IdentityStage:
         restarting, must have moved like its neighbours since it was last ok (without
         neighbours to vouch for it: only close to its own prediction)."""
         p = self.p
+        X, Y, S, SEC, ST, RS, resid = ctx.X, ctx.Y, ctx.S, ctx.SEC, ctx.ST, ctx.RS, ctx.resid
         if jmp.size:
             short = jmp[resid[jmp] < 0.4 * self._spacing[jmp]]
             ST[short] = OK
@@ -137,12 +130,16 @@ class IdentityStage:
             return np.array(good, np.int64)
         return np.array(bad, np.int64)
 
-    def _conflicts(self, sidx, XP, YP, prx, pry, merged, jn):
+    def _conflicts(self, sidx, ctx):
         """Markers that lost a blob to another marker this frame (boolean, all markers).
 
         Only a searched marker can land on another's blob (a fast-path marker stays within
-        a pixel of its own prediction), so searched markers are tested against all.
+        a pixel of its own prediction), so searched markers ``sidx`` are tested against
+        all with a pixel-level position (``ctx.XP, ctx.YP``); of two on one blob, the one
+        further from its prediction (scaled by its motion model's residual and its gap)
+        loses it, unless both are ``ctx.merged``.
         """
+        XP, YP, merged = ctx.XP, ctx.YP, ctx.merged
         n = len(XP)
         lose = np.zeros(n, bool)
         si = sidx[np.isfinite(XP[sidx])]
@@ -158,7 +155,7 @@ class IdentityStage:
             return lose
         # a marker that coasted has a vaguer prediction: it does not take a blob from one
         # tracked on the previous frame
-        cost = np.hypot(XP - prx, YP - pry) / (self.resid_rms + 0.5 + (self._gap - 1))
+        cost = np.hypot(XP - ctx.pred[:, 0], YP - ctx.pred[:, 1]) / (self.resid_rms + 0.5 + (ctx.gap - 1))
         for a, b in zip(*np.nonzero(same)):
             i, j = si[a], vi[b]
             if merged[i] and merged[j]:
@@ -167,14 +164,20 @@ class IdentityStage:
         return lose
 
 
-    def _search(self, frame, idx, pred, px, py, r, wide, j2, XP, YP, S, SEC):
+    def _search(self, frame, idx, ctx):
         """Windowed NCC around the predictions of markers ``idx``; wide-search consensus.
 
-        With numba, a marker whose window is small (radius <= 3: moving predictably) is
-        hill-climbed from its prediction instead (a window that small has no room for a
-        runner-up peak away from the best, so nothing is lost); one whose climb reaches
-        the window's edge gets the full search, twice as wide."""
+        Searches the window of radius ``ctx.r`` centred on the rounded prediction
+        (``ctx.px, ctx.py``) and writes the best match's pixel and score and the runner-up's
+        score to ``ctx.XP, ctx.YP, ctx.S, ctx.SEC``; the wide-searched markers are checked
+        by :meth:`_consensus`, which may move their ``ctx.pred``. With numba, a marker
+        whose window is small (radius <= 3: moving predictably) is hill-climbed from its
+        prediction instead (a window that small has no room for a runner-up peak away
+        from the best, so nothing is lost); one whose climb reaches the window's edge gets
+        the full search, twice as wide."""
         p = self.p
+        pred, px, py, r, wide, j2 = ctx.pred, ctx.px, ctx.py, ctx.r, ctx.wide, ctx.j2
+        XP, YP, S, SEC = ctx.XP, ctx.YP, ctx.S, ctx.SEC
         if engine.use_numba():
             small = (r[idx] <= 3) & ~wide[idx]
             if small.any():

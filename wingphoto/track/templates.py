@@ -10,7 +10,25 @@ from .refine import _gather
 
 
 class TemplateStage:
-    """Template cutting, blending and matching of :class:`~wingphoto.track.tracker.Tracker`."""
+    """Template cutting, blending and matching of :class:`~wingphoto.track.tracker.Tracker`.
+
+    The templates are tracker state (they persist from frame to frame); this mixin owns
+    them. Per marker ``i`` (N markers):
+
+    * ``tpl0[i]``, ``tplr[i]`` : (2 h[i] + 1, 2 h[i] + 1) float32 - the template cut on
+      the picks' frame and the running one (blended with each update,
+      :meth:`~wingphoto.track.tracker.Tracker._refresh_templates`); a checkpoint saves
+      both. The template matched is ``original_weight * tpl0 + (1 - original_weight) *
+      tplr``, which keeps the running template from drifting off the marker.
+    * ``tplu[i]`` : that template as OpenCV matches it (uint8 for 8-bit frames), made when
+      needed (:meth:`_tplu`), None when stale.
+    * ``tz`` (N, s, s) float32, ``tzf`` (N, s * s) its flat view, ``tmask`` (N, s * s),
+      ``tcount`` (N,), ``to`` (s,): the zero-mean, unit-norm templates padded to the
+      largest size ``s`` for the compiled kernels and :meth:`_score_at`, their masks,
+      pixel counts and offsets (:meth:`_init_stack`).
+
+    Reads the tracker's ``h`` (template half sizes), ``p.original_weight`` and ``is_u8``.
+    """
 
     def _cut(self, frame, x, y, h):
         """Template of size 2h+1 centred on sub-pixel (x, y), float32."""
@@ -22,12 +40,14 @@ class TemplateStage:
         return cv2.getRectSubPix(crop, (s, s), (float(x - x0), float(y - y0)))
 
     def _as_match(self, t):
+        """Template ``t`` as OpenCV matches it: rounded to uint8 for 8-bit frames, else float32."""
         if self.is_u8:
             return np.clip(np.rint(t), 0, 255).astype(np.uint8)
         return np.ascontiguousarray(t, dtype=np.float32)
 
 
     def _set_template(self, i):
+        """Marker ``i``'s templates changed: restack the matched template, drop ``tplu[i]``."""
         w = self.p.original_weight
         t = w * self.tpl0[i] + (1.0 - w) * self.tplr[i]
         self.tplu[i] = None  # made when needed (:meth:`_tplu`)
@@ -41,6 +61,7 @@ class TemplateStage:
         return self.tplu[i]
 
     def _stack_template(self, i, t):
+        """Write template ``t`` of marker ``i``, zero-mean and unit-norm, centred in ``tz[i]``."""
         s = self.tz.shape[1]
         hi = int(self.h[i])
         a = (s // 2) - hi
@@ -51,6 +72,8 @@ class TemplateStage:
         self.tz[i, a: a + 2 * hi + 1, a: a + 2 * hi + 1] = tz / max(nrm, 1e-12)
 
     def _init_stack(self):
+        """Build ``tz``, ``tzf``, ``tmask``, ``to`` and ``tcount`` from ``tpl0`` and ``tplr``
+        (set-up and resume)."""
         s = 2 * int(self.h.max()) + 1
         n = len(self.h)
         self.tz = np.zeros((n, s, s), np.float32)

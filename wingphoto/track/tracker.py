@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import logging
 import math
-from types import SimpleNamespace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,15 +44,181 @@ _MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
 
 
+@dataclass(eq=False)
+class FrameContext:
+    """Everything :meth:`Tracker.step` computes for one frame, passed to the stages.
+
+    A context is made by :meth:`Tracker._plan` at the start of each solve of a frame (a
+    broken constellation solves the frame again under each hypothesis, each with its own
+    context) and dropped with the frame: nothing in it is read on the next frame. What
+    persists from frame to frame is the tracker's state (:class:`Tracker`). Arrays have
+    one entry per marker (N, in the order of the picks); the stages fill them in place.
+
+    Attributes
+    ----------
+    pred : (N, 2) ndarray of float
+        Predicted position (x, y) px (:func:`~.predict.start_frame`); the wide-search
+        consensus (:meth:`~.identity.IdentityStage._consensus`) replaces the prediction of
+        a marker it re-searches at its neighbours' prediction.
+    gap : (N,) ndarray of int
+        Frames since the marker's last position that fed the motion model.
+    steady : (N,) ndarray of bool
+        Ok on the previous frame, which fed its motion model, with three points in its
+        history.
+    inside, fits : (N,) ndarray of bool
+        The prediction is in the image / its template fits in the image there.
+    r : (N,) ndarray of int
+        Search radius (px) around the rounded prediction.
+    F : (N,) ndarray of bool
+        Fast path (moving predictably, strongly matched, not crowded; every
+        ``search_every``-th frame searched anyway): refined at the rounded prediction
+        without a search, then verified (:meth:`Tracker._verify_fast`).
+    wide : (N,) ndarray of bool
+        No velocity yet: searched ``search_radius`` wide, checked by the neighbours'
+        consensus.
+    j2, d2 : (N, 2) ndarray of int / float
+        The two nearest other markers by prediction (-1: none) and their distances (px).
+    merged, crowded : (N,) ndarray of bool
+        The nearest other prediction lies within the two blob radii + 1 px (and the marker
+        is inside) / + 4 px.
+    px, py : (N,) ndarray of float
+        The predictions rounded to pixels, as planned (before the consensus moved any):
+        the centres of the search windows and the fast path's start.
+    aged : int
+        Frames the motion model's history was moved along before this solve: 1 to
+        ``_MAX_DROPPED`` for dropped frames, -1 for a repeated frame, 0 otherwise
+        (:meth:`Tracker._recover`).
+    nbr_r : (N,) ndarray of float
+        Disk radius + 0.5 px of each marker's nearest neighbour (the refiner's split).
+    XP, YP : (N,) ndarray of float
+        Pixel-level position (the correlation match, the rounded prediction of a fast-path
+        or edge marker); NaN: none.
+    S, SEC : (N,) ndarray of float
+        Correlation score of the match (NaN: none) and of the runner-up peak (-2: none).
+    lose : (N,) ndarray of bool
+        Lost its blob to another marker on this frame (:meth:`~.identity.IdentityStage._conflicts`).
+    eidx : (K,) ndarray of int
+        Markers predicted inside the image whose template does not fit (the edge).
+    X, Y : (N,) ndarray of float
+        Refined sub-pixel position (x, y) px; NaN: none.
+    mass : (N,) ndarray of float
+        Summed signal above the background of the refined blob (NaN: not refined).
+    info : dict of (N,) ndarray
+        The refiner's diagnostics: ``foreign``, ``rd``, ``bgres``, ``peak``, ``valley``,
+        ``spread``, ``dshape`` (:func:`~.refine._refine`).
+    ST, RS : (N,) ndarray of int8
+        Status and reason code (:mod:`~.status`), set by :meth:`Tracker._judge`.
+    resid : (N,) ndarray of float
+        Distance (px) of the refined position from the prediction (end of :meth:`Tracker._solve`).
+    sigma : (N,) ndarray of float
+        Per-axis 1-sigma uncertainty (px), set by :meth:`Tracker._judge`.
+    glitch : bool
+        No hypothesis explained a broken constellation: every point is flagged.
+    """
+
+    pred: np.ndarray
+    gap: np.ndarray
+    steady: np.ndarray
+    inside: np.ndarray
+    fits: np.ndarray
+    r: np.ndarray
+    F: np.ndarray
+    wide: np.ndarray
+    j2: np.ndarray
+    d2: np.ndarray
+    merged: np.ndarray
+    crowded: np.ndarray
+    px: np.ndarray
+    py: np.ndarray
+    aged: int
+    nbr_r: np.ndarray
+    XP: np.ndarray
+    YP: np.ndarray
+    S: np.ndarray
+    SEC: np.ndarray
+    lose: np.ndarray
+    eidx: np.ndarray
+    X: np.ndarray
+    Y: np.ndarray
+    mass: np.ndarray
+    info: dict
+    ST: np.ndarray
+    RS: np.ndarray
+    resid: np.ndarray = None
+    sigma: np.ndarray = None
+    glitch: bool = False
+
+
 class Tracker(TemplateStage, IdentityStage, ReacquireStage):
-    """State of one tracking pass; :meth:`step` processes one frame."""
+    """State of one tracking pass; :meth:`step` processes one frame.
+
+    The tracker holds only what persists from frame to frame; what one frame computes is
+    in its :class:`FrameContext`. The stage methods come from the mixins
+    (:class:`~.templates.TemplateStage`, :class:`~.identity.IdentityStage`,
+    :class:`~.reacquire.ReacquireStage`) and read the state below. Arrays have one entry
+    per marker (N, in the order of the picks).
+
+    Attributes
+    ----------
+    p : TrackOptions
+        The pass's options.
+    is_u8 : bool
+        The frames are 8-bit (OpenCV correlates 8-bit templates).
+    H, W : int
+        Frame height and width (px).
+    hist_x, hist_t, nh : (N, 3, 2), (N, 3), (N,) ndarray
+        Motion model: the last three positions (x, y) px that fed it, newest first, their
+        frames and how many are known (:mod:`~.predict`).
+    resid_rms : (N,) ndarray of float
+        Running RMS (px) of the motion model's residual.
+    lostflag : (N,) ndarray of bool
+        Lost (coasted beyond ``max_coast``), waiting for re-acquisition.
+    last_ok, last_upd : (N,) ndarray of int
+        Frame of the last ``ok`` point / of the last template update.
+    last_score, score_ref, mass_ref : (N,) ndarray of float
+        Score of the last frame (0 unless ok) and running references of score and mass of
+        the ok points (the status rules' drops).
+    stagger : (N,) ndarray of int
+        Phase of the fast path's periodic full search (``search_every``).
+    h, rb, rd : (N,) ndarray
+        Template half size (px), blob radius (px) and the refiner's disk radius (px),
+        fixed on the picks' frame.
+    sign, sign64 : (N,) ndarray of float32 / float64
+        Polarity (+1 bright marker, -1 dark).
+    noise : (N,) ndarray of float
+        Image noise (grey levels) around each marker on the picks' frame.
+    mass0, peak0 : (N,) ndarray of float
+        Mass and peak contrast on the picks' frame.
+    pos : (N, 2) ndarray of float
+        Position (x, y) px written on the last frame (NaN: none).
+    ref_pos : (N, 2) ndarray of float
+        Positions on the picks' frame (the wide search's consensus compares
+        displacements from it).
+    tpl0, tplr, tplu, tz, ... : templates
+        The picks' and the running templates and their correlation stack
+        (:class:`~.templates.TemplateStage`).
+    local : float
+        Radius (px) of a marker's neighbourhood; ``_spacing`` (N,): distance to the
+        nearest marker there (:meth:`_set_local`).
+    pick_moved, sigma0 : (N,) ndarray
+        The picks' frame only: the refinement moved away from the click (the click is
+        kept), and the picks' sigma (:meth:`from_picks`).
+    _prev, _prev2 : ndarray or None
+        The previous two frames (repeated frames, camera bumps).
+
+    Notes
+    -----
+    :attr:`_STATE` lists the arrays a checkpoint saves (with the templates ``tpl0`` and
+    ``tplr``); on resume (:meth:`from_state`) the rest is derived from them and the
+    previous frames start empty.
+    ``_fast_par`` caches the fast frame's constant arguments (:mod:`~.fastpath`).
+    """
 
     _STATE = ("hist_x", "hist_t", "nh", "resid_rms", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
               "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "noise", "peak0", "last_ok")
 
     def __init__(self, p, is_u8, shape):
         self._prev = self._prev2 = None
-        self._aged = 0
         self.p = p
         self.is_u8 = is_u8
         self.H, self.W = shape
@@ -242,12 +408,12 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         most markers left their predictions together: a dropped frame, a bumped camera,
         :meth:`_recover`), the status rules (:meth:`_judge`), then the motion-model and
         template update and the re-acquisition of lost markers (:meth:`_update`). What
-        one frame computes travels in a context object (``ctx``), not in the tracker.
+        one frame computes travels in its :class:`FrameContext` (``ctx``), passed to each
+        stage; the tracker keeps only the state that persists from frame to frame.
         """
         if fast_step(self, frame, t, res):
             return  # a steady frame, handled end to end by the compiled fast frame
         if not self._frame_glitch(frame, t, res, direction):
-            self._aged = 0
             ctx = self._solve(frame, t)
             if self._broken(ctx):
                 ctx = self._recover(frame, t, direction, ctx)
@@ -261,7 +427,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         A blank frame's points are lost (reason ``blank``) and the motion model coasts;
         a repeated frame gets the previous frame's rows (the same image: the same
         positions) and the motion model's history moves one frame on, as time did not
-        advance. Returns True when the frame was handled."""
+        advance. Returns True when the frame was handled.
+
+        Reads the previous frame ``_prev``; writes ``pos`` (blank), ``hist_t`` and
+        ``last_ok`` (repeated) and rows ``t`` of ``res``."""
         s = frame[:: _SAMPLE, :: _SAMPLE]
         floating = frame.dtype.kind == "f"
         if not (s.max() > s.min()) or (floating and not np.isfinite(s).all()):
@@ -285,81 +454,110 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         self.last_ok[self.last_ok == tp] = t
         return True
 
-    def _solve(self, frame, t):
-        """Predict, match and refine every marker on frame ``t``; returns the context."""
+    def _solve(self, frame, t, aged=0):
+        """Predict, match and refine every marker on frame ``t``; returns its :class:`FrameContext`.
+
+        :meth:`_plan` (predictions, search plan), :meth:`_match_all` (correlation
+        search, conflicts), :meth:`_refine_matched` (sub-pixel refinement) and
+        :meth:`_verify_fast` (the fast-path markers' check); ``aged``: frames the motion
+        model's history was moved along before this solve (:meth:`_recover`)."""
+        ctx = self._plan(t, aged)
+        sidx, fidx = self._match_all(frame, ctx)
+        nb = self._refine_matched(frame, ctx)
+        if fidx.size:
+            self._verify_fast(frame, ctx, sidx, fidx, nb)
+        ctx.resid = np.hypot(ctx.X - ctx.pred[:, 0], ctx.Y - ctx.pred[:, 1])
+        return ctx
+
+    def _plan(self, t, aged):
+        """The frame's context: predictions and search plan (:func:`~.predict.start_frame`,
+        which also marks markers coasted too long in ``lostflag``) and empty results.
+
+        Reads the motion model (``hist_x``, ``hist_t``, ``nh``, ``resid_rms``, ``last_ok``,
+        ``last_score``, ``stagger``) and the markers' sizes; writes ``lostflag``."""
         p = self.p
         n = len(self.h)
-        h = self.h
-        ctx = SimpleNamespace(**start_frame(
-            t, self.hist_x, self.hist_t, self.nh, self.resid_rms, self.lostflag, self.last_ok, self.last_score,
-            self.stagger, h, self.rb, self.W, self.H, p.max_coast, p.search_every, p.search_radius))
-        pred, fits, F, r, wide, j2, merged, inside = (ctx.pred, ctx.fits, ctx.F, ctx.r, ctx.wide, ctx.j2,
-                                                        ctx.merged, ctx.inside)
-        prx, pry = pred[:, 0], pred[:, 1]
-        px, py = np.rint(prx), np.rint(pry)
-        track = ~self.lostflag
-        edge = inside & ~fits
-        # (scratch read by the stages' helpers on this frame)
-        self._gap, self._pred, self._steady, self._j2, self._merged = ctx.gap, pred, ctx.steady, j2, merged
-        jn = j2[:, 0]
-        X, Y, S, XP, YP = (np.full(n, np.nan) for _ in range(5))
-        SEC = np.full(n, -2.0)
-        ST = np.full(n, LOST, np.int8)
+        plan = start_frame(t, self.hist_x, self.hist_t, self.nh, self.resid_rms, self.lostflag, self.last_ok,
+                           self.last_score, self.stagger, self.h, self.rb, self.W, self.H, p.max_coast,
+                           p.search_every, p.search_radius)
+        pred = plan["pred"]
         RS = np.zeros(n, np.int8)
-        RS[track & ~inside] = _R["out_of_frame"]
+        RS[~self.lostflag & ~plan["inside"]] = _R["out_of_frame"]
         RS[self.lostflag] = _R["lost_track"]
-        lose = np.zeros(n, bool)
-        # matching: windowed NCC around the predictions (fast-path markers skip it)
-        sidx = (fits & ~F).nonzero()[0]
+        return FrameContext(
+            **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged,
+            nbr_r=self.rd[np.maximum(plan["j2"][:, 0], 0)] + 0.5,
+            XP=np.full(n, np.nan), YP=np.full(n, np.nan), S=np.full(n, np.nan), SEC=np.full(n, -2.0),
+            lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
+            X=np.full(n, np.nan), Y=np.full(n, np.nan), mass=np.full(n, np.nan),
+            info=dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n), peak=np.full(n, np.nan),
+                      valley=np.full(n, np.nan), spread=np.full(n, np.nan), dshape=np.full(n, np.nan)),
+            ST=np.full(n, LOST, np.int8), RS=RS)
+
+    def _match_all(self, frame, ctx):
+        """Pixel-level positions ``ctx.XP, ctx.YP``: windowed NCC around the predictions
+        (:meth:`~.identity.IdentityStage._search`) of the markers that fit and are not on
+        the fast path, which lose a blob taken by another marker (``ctx.lose``); the
+        fast-path and edge markers start at their rounded predictions. Returns the
+        searched and the fast-path markers (indices)."""
+        XP, YP = ctx.XP, ctx.YP
+        sidx = (ctx.fits & ~ctx.F).nonzero()[0]
         if sidx.size:
-            self._search(frame, sidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
-            lose = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
-            XP[lose] = np.nan
-            YP[lose] = np.nan
-        fidx = F.nonzero()[0]
-        XP[fidx], YP[fidx] = px[fidx], py[fidx]
-        eidx = edge.nonzero()[0]
-        XP[eidx], YP[eidx] = px[eidx], py[eidx]
-        # sub-pixel refinement of everything that has a pixel-level position, jointly
-        ridx = np.isfinite(XP).nonzero()[0]
-        mass = np.full(n, np.nan)
-        self._info = info = dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n),
-                                 peak=np.full(n, np.nan), valley=np.full(n, np.nan), spread=np.full(n, np.nan),
-                                 dshape=np.full(n, np.nan))
+            self._search(frame, sidx, ctx)
+            ctx.lose = self._conflicts(sidx, ctx)
+            XP[ctx.lose] = np.nan
+            YP[ctx.lose] = np.nan
+        fidx = ctx.F.nonzero()[0]
+        XP[fidx], YP[fidx] = ctx.px[fidx], ctx.py[fidx]
+        eidx = ctx.eidx
+        XP[eidx], YP[eidx] = ctx.px[eidx], ctx.py[eidx]
+        return sidx, fidx
+
+    def _refine_matched(self, frame, ctx):
+        """Sub-pixel refinement of every marker with a pixel-level position, jointly
+        (``ctx.X, ctx.Y, ctx.mass, ctx.info``); the edge markers' pixel-level positions are
+        then cleared (no correlation match). Returns the neighbour positions used for the
+        pixel split, (N, 2) NaN where none."""
+        n = len(self.h)
+        ridx = np.isfinite(ctx.XP).nonzero()[0]
         nb = np.full((n, 2), np.nan)
         if ridx.size:
             if engine.use_numba():
-                nb = self._refine_all(frame, ridx, XP, YP, jn, X, Y, mass)
+                nb = self._refine_all(frame, ridx, ctx)
             else:
-                nb = self._voronoi(XP, YP, prx, pry, jn, inside)
-                X[ridx], Y[ridx], mass[ridx] = self._refine_at(frame, ridx, XP, YP, nb)
-        XP[eidx] = YP[eidx] = np.nan  # no correlation match for edge markers
-        if fidx.size:
-            # verify the fast path: NCC at the refined pixel, small residual, blob still there
-            S[fidx] = self._score_at(frame, fidx, np.rint(X[fidx]), np.rint(Y[fidx]))
-            XP[fidx], YP[fidx] = np.rint(X[fidx]), np.rint(Y[fidx])
-            resf = np.hypot(X[fidx] - prx[fidx], Y[fidx] - pry[fidx])
-            bad = ~((S[fidx] >= 0.85) & (resf < np.maximum(1.0, 4.0 * self.resid_rms[fidx]))
-                    & (mass[fidx] > p.min_mass_ratio * self.mass0[fidx]))
-            if bad.any():
-                vidx = fidx[bad]
-                self._search(frame, vidx, pred, px, py, r, wide, j2, XP, YP, S, SEC)
-                sidx = np.concatenate([sidx, vidx])
-                lose2 = self._conflicts(sidx, XP, YP, prx, pry, merged, jn)
-                XP[lose2 & ~lose] = np.nan
-                YP[lose2 & ~lose] = np.nan
-                lose = lose2
-                # refine again the re-searched markers and those whose neighbour moved
-                nb2 = self._voronoi(XP, YP, prx, pry, jn, inside)
-                changed = (np.isfinite(nb2[:, 0]) != np.isfinite(nb[:, 0])) | (
-                    np.hypot(nb2[:, 0] - nb[:, 0], nb2[:, 1] - nb[:, 1]) > 1.5)
-                changed[vidx] = True
-                redo = (changed & np.isfinite(XP)).nonzero()[0]
-                if redo.size:
-                    X[redo], Y[redo], mass[redo] = self._refine_at(frame, redo, XP, YP, nb2)
-        ctx.__dict__.update(X=X, Y=Y, S=S, SEC=SEC, XP=XP, YP=YP, ST=ST, RS=RS, lose=lose, mass=mass, info=info,
-                   eidx=eidx, resid=np.hypot(X - prx, Y - pry), glitch=False, aged=self._aged)
-        return ctx
+                nb = self._voronoi(ctx)
+                ctx.X[ridx], ctx.Y[ridx], ctx.mass[ridx] = self._refine_at(frame, ridx, nb, ctx)
+        ctx.XP[ctx.eidx] = ctx.YP[ctx.eidx] = np.nan  # no correlation match for edge markers
+        return nb
+
+    def _verify_fast(self, frame, ctx, sidx, fidx, nb):
+        """Verify the fast-path markers ``fidx``: NCC at the refined pixel, a small residual,
+        the blob still there. The others are searched after all (with ``sidx``, the
+        markers searched before, in the conflict test), and re-refined with those whose
+        neighbour's split moved (``nb``: the split used)."""
+        X, Y, S, XP, YP, mass = ctx.X, ctx.Y, ctx.S, ctx.XP, ctx.YP, ctx.mass
+        prx, pry = ctx.pred[:, 0], ctx.pred[:, 1]
+        S[fidx] = self._score_at(frame, fidx, np.rint(X[fidx]), np.rint(Y[fidx]))
+        XP[fidx], YP[fidx] = np.rint(X[fidx]), np.rint(Y[fidx])
+        resf = np.hypot(X[fidx] - prx[fidx], Y[fidx] - pry[fidx])
+        bad = ~((S[fidx] >= 0.85) & (resf < np.maximum(1.0, 4.0 * self.resid_rms[fidx]))
+                & (mass[fidx] > self.p.min_mass_ratio * self.mass0[fidx]))
+        if not bad.any():
+            return
+        vidx = fidx[bad]
+        self._search(frame, vidx, ctx)
+        lose = self._conflicts(np.concatenate([sidx, vidx]), ctx)
+        XP[lose & ~ctx.lose] = np.nan
+        YP[lose & ~ctx.lose] = np.nan
+        ctx.lose = lose
+        # refine again the re-searched markers and those whose neighbour moved
+        nb2 = self._voronoi(ctx)
+        changed = (np.isfinite(nb2[:, 0]) != np.isfinite(nb[:, 0])) | (
+            np.hypot(nb2[:, 0] - nb[:, 0], nb2[:, 1] - nb[:, 1]) > 1.5)
+        changed[vidx] = True
+        redo = (changed & np.isfinite(XP)).nonzero()[0]
+        if redo.size:
+            X[redo], Y[redo], mass[redo] = self._refine_at(frame, redo, nb2, ctx)
 
     # ------------------------------------------------------------ constellation
     def _consistent(self, ctx, extra=0.0):
@@ -413,7 +611,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         best, best_key = None, (self._consistent(ctx)[1], -np.inf)
         for dt, dx, dy in hyps:
             self._set_model(saved, dt, dx, dy, direction)
-            c = self._solve(frame, t)
+            c = self._solve(frame, t, aged=dt)
             n, good = self._consistent(c, _DROP_TOL * abs(dt))
             with np.errstate(invalid="ignore"):
                 r = c.resid[c.fits & (self.nh >= 2)]
@@ -432,14 +630,13 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         logger.info("frame %d: constellation restored by %s", t,
                     f"{best[0]} frame(s) dropped" if best[0] > 0 else "a repeated frame" if best[0] < 0
                     else f"a camera shift of ({best[1]:.1f}, {best[2]:.1f}) px")
-        return self._solve(frame, t)
+        return self._solve(frame, t, aged=best[0])
 
     def _set_model(self, saved, dt, dx, dy, direction):
         """Restore the motion model from ``saved``, then move its history ``dt`` frames
         along each marker's motion (:func:`~.predict.shift_history`) and shift its
         positions by (dx, dy) px."""
         hx, ht, lf = saved
-        self._aged = dt
         self.hist_x[...] = shift_history(hx, ht, self.nh, dt * direction) if dt else hx
         self.hist_t[...] = ht
         self.lostflag[...] = lf
@@ -492,7 +689,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             # static dot next to the moving wing)
             chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
-                self._vouch(jmp, chk, X, Y, S, SEC, ST, RS, ctx.resid, res, t)
+                self._vouch(jmp, chk, ctx, res, t)
         eidx = ctx.eidx
         if eidx.size:
             ex, ey = X[eidx], Y[eidx]
@@ -571,10 +768,12 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""
         return np.minimum(self.rb + _RD_MARGIN + 3.0, _RD_MAX)
 
-    def _refine_all(self, frame, idx, XP, YP, jn, X, Y, mass):
+    def _refine_all(self, frame, idx, ctx):
         """:meth:`_voronoi` and :meth:`_refine_at` of markers ``idx`` by the compiled
-        kernel; returns the neighbour positions used for the split."""
-        info = self._info
+        kernel (``ctx.X, ctx.Y, ctx.mass, ctx.info``); returns the neighbour positions used
+        for the split."""
+        XP, YP, X, Y, mass, info = ctx.XP, ctx.YP, ctx.X, ctx.Y, ctx.mass, ctx.info
+        jn = ctx.j2[:, 0]
         n = len(XP)
         nb = np.full((n, 2), np.nan)
         foreign = np.zeros(n, np.bool_)
@@ -582,32 +781,34 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                            FOREIGN_FRACTION, FOREIGN_NOISE, X, Y, mass, foreign, info["bgres"], info["peak"],
                            info["valley"], info["spread"], info["dshape"], nb)
         info["foreign"] = foreign
-        self._nbr_r = self.rd[np.maximum(jn, 0)] + 0.5
         # a foreign blob next to a steady marker: split off like a neighbour (rare)
         cand = idx[foreign[idx] & (mass[idx] > 0)]
         if cand.size:
-            steady = self._steady[cand] & (np.hypot(XP[cand] - self._pred[cand, 0], YP[cand] - self._pred[cand, 1])
-                                           <= 2.0 + 2.0 * self.resid_rms[cand])
+            steady = ctx.steady[cand] & (np.hypot(XP[cand] - ctx.pred[cand, 0], YP[cand] - ctx.pred[cand, 1])
+                                         <= 2.0 + 2.0 * self.resid_rms[cand])
             cand = cand[steady]
             if cand.size:
                 xx, yy, mm, inf = _refine(frame, XP[cand], YP[cand], self.rd[cand], self.sign[cand], self.noise[cand],
-                                          nb[cand], 2, rmax=self.rd[cand], nbr_r=self._nbr_r[cand],
+                                          nb[cand], 2, rmax=self.rd[cand], nbr_r=ctx.nbr_r[cand],
                                           explain=np.ones(cand.size, bool))
                 X[cand], Y[cand], mass[cand] = xx, yy, mm
                 for k in ("foreign", "bgres", "peak", "valley", "spread", "dshape"):
                     info[k][cand] = inf[k]
         return nb
 
-    def _refine_at(self, frame, idx, XP, YP, nb):
-        """Refine markers ``idx`` from their pixel-level positions; record diagnostics.
+    def _refine_at(self, frame, idx, nb, ctx):
+        """Refine markers ``idx`` from their pixel-level positions ``ctx.XP, ctx.YP`` with
+        the neighbour positions ``nb`` (:meth:`_voronoi`); record the diagnostics in
+        ``ctx.info``; returns x, y and mass of the markers ``idx``.
 
         A foreign blob next to a marker tracked on the previous frame and matched where
         predicted is split off like a known neighbour (:func:`_refine`)."""
-        steady = self._steady[idx] & (np.hypot(XP[idx] - self._pred[idx, 0], YP[idx] - self._pred[idx, 1])
-                                      <= 2.0 + 2.0 * self.resid_rms[idx])
+        XP, YP = ctx.XP, ctx.YP
+        steady = ctx.steady[idx] & (np.hypot(XP[idx] - ctx.pred[idx, 0], YP[idx] - ctx.pred[idx, 1])
+                                    <= 2.0 + 2.0 * self.resid_rms[idx])
         x, y, m, inf = _refine(frame, XP[idx], YP[idx], self.rd[idx], self.sign[idx], self.noise[idx], nb[idx], 2,
-                               rmax=self.rd[idx], nbr_r=self._nbr_r[idx], explain=steady)
-        info = self._info
+                               rmax=self.rd[idx], nbr_r=ctx.nbr_r[idx], explain=steady)
+        info = ctx.info
         info["foreign"][idx] = inf["foreign"]
         info["bgres"][idx] = inf["bgres"]
         info["peak"][idx] = inf["peak"]
@@ -617,16 +818,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         info["rd"][idx] = inf["rd"]
         return x, y, m
 
-    def _voronoi(self, XP, YP, prx, pry, jn, inside):
+    def _voronoi(self, ctx):
         """Position of each marker's nearest neighbour for the pixel split (NaN: none near)."""
+        XP, YP, jn = ctx.XP, ctx.YP, ctx.j2[:, 0]
         j = np.maximum(jn, 0)
         # only a neighbour matched on this frame: one that lost its match to another
         # marker (conflict) may be anywhere near its prediction, and a split there could
         # cut this marker's own blob (its blob, if near, is caught as foreign instead)
         nx = XP[j].copy()
         ny = YP[j].copy()
-        cx = np.where(np.isfinite(XP), XP, prx)
-        cy = np.where(np.isfinite(YP), YP, pry)
+        cx = np.where(np.isfinite(XP), XP, ctx.pred[:, 0])
+        cy = np.where(np.isfinite(YP), YP, ctx.pred[:, 1])
         # the neighbour matters when its blob can reach this marker's disk or ring
         reach = self.rd + 3.0 + self.rb[j]
         dn = np.hypot(nx - cx, ny - cy)
@@ -634,6 +836,4 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         far = (jn < 0) | ~(dn < reach) | (dn < 1.5)
         nx[far] = np.nan
         ny[far] = np.nan
-        self._nbr_r = self.rd[j] + 0.5
         return np.column_stack([nx, ny])
-
