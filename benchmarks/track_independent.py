@@ -56,6 +56,21 @@ def reasons_of_loss(tr, seq):
     return Counter((bad["status"].fillna("missing") + ":" + reason.astype(str)).tolist())
 
 
+def sequence_notes(tr, seq, ok):
+    """One line on a sequence's wing markers: ok share, lost while face-on, frames with none ok."""
+    wing = seq.point_kind == "wing"
+    vis = seq.visible & wing
+    lost = np.zeros_like(vis)
+    if len(tr):
+        t = tr[tr["status"] == "lost"]
+        lost[t["frame"].to_numpy(int), t["point"].to_numpy(int)] = True
+    face_lost = int((lost & vis & (seq.view_angle < 45)).sum())
+    none_ok = np.flatnonzero(vis.any(1) & ~(ok & vis).any(1))
+    span = f"{none_ok.min()}-{none_ok.max()} ({none_ok.size} frames)" if none_ok.size else "none"
+    return (f"wing ok {(ok & vis).sum() / max(vis.sum(), 1):.3f}, lost while face-on (< 45 deg) {face_lost}, "
+            f"frames with no ok wing marker: {span}")
+
+
 def confident_rows(tr, seq, err, ok, label):
     """One line per confident error: frame, point, its kind, error, the tracked and true positions."""
     out = []
@@ -108,7 +123,7 @@ def main(argv=None):
     print(f"independent renderer, seed set {args.set}: {list(seeds)}, {args.frames} frames, cameras {args.cameras}")
     print(f"{'kind':9s} {'cam':5s} {'seqs':>4s} {'ok':>6s} {'RMS':>6s} {'p95':>6s} {'worst':>6s} {'conf':>5s} "
           f"{'<=3sig':>6s} {'med e/s':>7s} {'fps':>6s}  non-ok visible point-frames by status:reason")
-    rows, confident, crashes = [], [], []
+    rows, confident, crashes, notes = [], [], [], []
     warm = independent.render_independent(args.kinds[0], seed=seeds[0], camera=args.cameras[0], n_frames=4)
     track_one(warm)  # compile the kernels outside the timed runs
     for kind in args.kinds:
@@ -128,6 +143,7 @@ def main(argv=None):
                 for k in pooled:
                     pooled[k].append(a[k].ravel())
                 reasons += reasons_of_loss(tr, seq)
+                notes.append(f"  {label}: {sequence_notes(tr, seq, a['ok'])}; glitch {seq.glitch}")
                 confident += confident_rows(tr, seq, a["error"], a["ok"], label)
                 if args.save:
                     base = os.path.join(args.save, f"{kind}_{seed}_{cam}")
@@ -156,6 +172,9 @@ def main(argv=None):
     print(f"table written to {out}")
     n_conf = sum(r["confident_errors"] for r in rows)
     print(f"confident errors (ok > 1 px): {n_conf}; crashed runs: {len(crashes)}")
+    print("per sequence:")
+    for line in notes:
+        print(line)
     for line in confident[:200]:
         print(line)
     if len(confident) > 200:
