@@ -1,6 +1,7 @@
 """Re-acquisition of long-lost markers from their neighbours."""
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -9,6 +10,62 @@ from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
 from .status import _R, _SOFT, FLAGGED, OK
+
+logger = logging.getLogger(__name__)
+
+
+#: A line prediction (:func:`_line_prediction`) needs its neighbours to fit their line's
+#: map within this RMS (px), like the affine maps of :func:`~.geometry._neighbour_prediction`.
+_LINE_RMS = 1.5
+
+
+def _line_prediction(p0, src, dst, max_off):
+    """Map ``p0`` by the 1-D map of the line its neighbours form, if it lies on that line.
+
+    Parameters
+    ----------
+    p0 : (2,) ndarray of float
+        The marker's position in the reference frame, px.
+    src, dst : (m, 2) ndarray of float
+        Its neighbours' positions in the reference frame and now, px; m >= 3.
+    max_off : float
+        Largest distance (px) of ``p0`` from the neighbours' line in the reference frame.
+
+    Returns
+    -------
+    (2,) ndarray of float or None
+        The predicted position: the neighbours' positions along their line ``s`` map to
+        now by ``a + b s`` (least squares, RMS residual at most :data:`_LINE_RMS`); None
+        when ``p0`` is off the line, beyond the neighbours' span by more than that span,
+        or the neighbours are not nearly on a line or do not fit such a map.
+
+    Notes
+    -----
+    A planar wing moves by an affine map, but an affine map from neighbours on a line
+    leaves free where the points off that line go (the wing's fold about it): only
+    ``p0`` on the line is determined. An edge-on wing may leave only such a row of
+    markers ok, too few for :func:`~.geometry._robust_affine`: without this, a marker
+    lost there is never re-acquired, nor are those that need it as a neighbour.
+    """
+    c = src.mean(0)
+    _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
+    if sv[0] <= 0:
+        return None
+    u, nrm = vt[0], vt[1]
+    e = (src - c) @ nrm
+    if np.abs(e).max() > max_off:
+        return None  # not a line
+    s = (src - c) @ u
+    s0 = float((p0 - c) @ u)
+    span = float(s.max() - s.min())
+    if abs(float((p0 - c) @ nrm)) > max_off or not s.min() - span <= s0 <= s.max() + span:
+        return None
+    A = np.column_stack([np.ones(s.size), s])
+    coef, *_ = np.linalg.lstsq(A, dst, rcond=None)
+    rms = float(np.sqrt(np.mean(np.sum((A @ coef - dst) ** 2, axis=1))))
+    if rms > _LINE_RMS:
+        return None
+    return coef[0] + coef[1] * s0
 
 
 class ReacquireStage:
@@ -45,10 +102,11 @@ class ReacquireStage:
             if c1.size >= 2:
                 pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
+                    logger.debug("frame %d: marker %d predicted from its neighbours then %s", t, i, c1.tolist())
                     return pq[0], p.reacquire_radius, p.reacquire_score, c1
         # 2. from the reference frame
         cur = np.column_stack([X[okn], Y[okn]])
-        if okn.size >= 4:
+        if okn.size >= 3:
             use = np.ones(okn.size, bool)
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
@@ -67,7 +125,16 @@ class ReacquireStage:
                     break
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
+                    logger.debug("frame %d: marker %d predicted from the reference frame by %s", t, i, okn[near].tolist())
                     return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
+            # 2b. too few of its kind for an affine map (a wing turning edge-on may leave
+            # only one row of markers ok): a marker on the line they form is still mapped
+            near = order[:6]
+            if near.size >= 3:
+                ql = _line_prediction(ref[i], ref[okn[near]], cur[near], 0.25 * float(self._spacing[i]))
+                if ql is not None:
+                    logger.debug("frame %d: marker %d predicted on the line of %s", t, i, okn[near].tolist())
+                    return ql, p.reacquire_radius, p.reacquire_score, okn[near]
         # 3. an isolated marker: fewer than two other markers near it in the reference
         # frame (not: fewer than two ok now - its neighbours may be lost with it)
         others = np.flatnonzero(np.isfinite(ref[:, 0]))
