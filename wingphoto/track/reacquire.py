@@ -68,6 +68,16 @@ def _line_prediction(p0, src, dst, max_off):
     return coef[0] + coef[1] * s0
 
 
+#: A marker flagged ``imprecise`` serves as a neighbour for re-acquisition only if it was
+#: ok or imprecise on each of the last _ANCHOR_FRAMES frames.
+_ANCHOR_FRAMES = 5
+
+
+def _certain(status, reason):
+    """True where a point's identity is certain: ok, or flagged only for its precision."""
+    return (status == OK) | ((status == FLAGGED) & (reason == _R["imprecise"]))
+
+
 class ReacquireStage:
     """Re-acquisition of :class:`~wingphoto.track.tracker.Tracker`."""
 
@@ -125,7 +135,8 @@ class ReacquireStage:
                     break
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
-                    logger.debug("frame %d: marker %d predicted from the reference frame by %s", t, i, okn[near].tolist())
+                    logger.debug("frame %d: marker %d predicted from the reference frame by %s (rms %.2f)", t, i,
+                                 okn[near].tolist(), rms)
                     return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
             # 2b. too few of its kind for an affine map (a wing turning edge-on may leave
             # only one row of markers ok): a marker on the line they form is still mapped
@@ -150,6 +161,15 @@ class ReacquireStage:
             q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
         return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
 
+    def _certain_lately(self, res, t, direction):
+        """Markers ok or only ``imprecise`` on each of the last :data:`_ANCHOR_FRAMES`
+        frames before ``t`` (in the pass's direction; frames before its first count)."""
+        T = res.x.shape[0]
+        rows = [t - direction * k for k in range(1, _ANCHOR_FRAMES + 1) if 0 <= t - direction * k < T]
+        if not rows:
+            return np.ones(res.x.shape[1], bool)
+        return _certain(res.status[rows], res.reason[rows]).all(0)
+
     def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred):
         """Search again for long-lost markers where their reliable neighbours put them.
 
@@ -160,7 +180,13 @@ class ReacquireStage:
         (it could be that marker's blob), and if its refinement finds no foreign blob.
         """
         p = self.p
-        okn = np.flatnonzero(ST == OK)
+        # the anchors: ok markers, and those flagged only for their precision
+        # (``imprecise`` is the first status rule: every identity rule passed)
+        # - followed without doubt on the last _ANCHOR_FRAMES frames: a marker just re-acquired
+        # (or coasting back) may still be on another's blob, and it would pass that on
+        anchor = (ST == OK) | ((ST == FLAGGED) & (RS == _R["imprecise"]) & np.isfinite(X)
+                              & self._certain_lately(res, t, direction))
+        okn = np.flatnonzero(anchor)
         if okn.size < 1:
             return
         lost = np.flatnonzero(self.lostflag)
@@ -173,6 +199,8 @@ class ReacquireStage:
         q = {}
         for i in lost.tolist():
             r = self._predict_lost(i, okn, X, Y, res, t)
+            if r is None:
+                logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
             if r is not None:
                 q[i] = r
                 est_x[i], est_y[i] = r[0]
@@ -201,6 +229,7 @@ class ReacquireStage:
             u, v, score, second, _ = _analyse_maps(maps, shp, np.array([ex]))
             sc = float(score[0])
             if not (sc >= min_sc and second[0] < sc - p.ambiguity_margin):
+                logger.debug("frame %d: marker %d: score %.2f, second %.2f", t, i, sc, second[0])
                 continue
             mx, my = float(origin[0, 0] + u[0]), float(origin[0, 1] + v[0])
             # joint test: this marker's prediction must be the nearest to the blob
@@ -211,6 +240,7 @@ class ReacquireStage:
                 do = np.hypot(est_x[others] - mx, est_y[others] - my).min()
                 dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
                 if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
+                    logger.debug("frame %d: marker %d: another prediction nearer (%.1f, %.1f, %.1f px)", t, i, dq, do, dqo)
                     continue
             # and no uncertain marker (flagged, or lost) may be near: the blob could be
             # its own, and a wrong re-acquisition would be confident from then on
@@ -241,6 +271,8 @@ class ReacquireStage:
                 break
             if okb:
                 accept.append(i)
+            else:
+                logger.debug("frame %d: marker %d: blocked by %s", t, i, blockers.tolist())
         for i in accept:
             mx, my, sc, _ = found[i]
             nbrs = q[i][3]
@@ -248,9 +280,10 @@ class ReacquireStage:
             # (a long interval: 4 px tolerance, a neighbour's blob is further)
             Xi, Yi = X[i], Y[i]
             X[i], Y[i] = mx, my
-            wrong = self._inconsistent(np.array([i]), X, Y, ST, res, t, min_lim=4.0).size > 0
+            wrong = self._inconsistent(np.array([i]), X, Y, np.where(anchor, OK, ST), res, t, min_lim=4.0).size > 0
             X[i], Y[i] = Xi, Yi
             if wrong:
+                logger.debug("frame %d: marker %d: inconsistent with its neighbours", t, i)
                 continue
             nb = None
             oth = np.flatnonzero(np.isfinite(X))
@@ -264,8 +297,10 @@ class ReacquireStage:
             rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
                                         rmax=self.rd[sel])
             if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
+                logger.debug("frame %d: marker %d: faint or foreign", t, i)
                 continue
             X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
+            logger.debug("frame %d: marker %d re-acquired at (%.1f, %.1f), score %.2f", t, i, rx[0], ry[0], sc)
             ST[i] = FLAGGED
             RS[i] = _R["reacquired"]
             est_x[i], est_y[i] = rx[0], ry[0]
@@ -273,7 +308,7 @@ class ReacquireStage:
             tp = t - direction
             vel = np.zeros(2)
             if 0 <= tp < res.x.shape[0] and len(nbrs):
-                both = nbrs[res.status[tp, nbrs] == OK]
+                both = nbrs[_certain(res.status[tp, nbrs], res.reason[tp, nbrs])]
                 if both.size:
                     vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
             self.hist_x[i] = np.nan
