@@ -4,7 +4,7 @@ import pytest
 
 from wingphoto import track_markers
 from wingphoto.synth import scenarios
-from wingphoto.track.reacquire import _line_prediction
+from wingphoto.track.reacquire import _determined, _line_prediction
 from wingphoto.validation import point_errors
 
 
@@ -53,14 +53,36 @@ def test_edge_on_wing_reacquired_from_one_row(edge_on_dev1):
     # three wing markers that stay ok (8: 11, 14, 17) is imprecise for a few frames as
     # the wing turns edge-on, then lost; the others were already lost, and an affine map
     # needs four. Without the row's map nothing on the wing was re-acquired for the rest
-    # of the sequence: 1206 ok point-frames, against 1450 (1555 at the default max_sigma).
+    # of the sequence: 1206 ok point-frames, 1256 with it.
     seq = edge_on_dev1
     tr = track_markers(seq.frames("right"), seq.picks("right"), camera="right", progress=False, max_sigma=0.15)
     a = point_errors(tr, seq, "right")
     ok = a["ok"] & a["visible"]
     assert not (a["error"][ok] > 1.0).any()
-    assert ok.sum() > 1350, ok.sum()
-    # the wing markers are followed again after the edge-on phase (frames ~30-45)
-    vis = a["visible"][50:70, :17]
-    followed = np.isfinite(a["error"][50:70, :17]) & vis
-    assert followed.sum() > 0.7 * vis.sum(), (followed.sum(), vis.sum())  # 268 of 340; 60 without
+    # marker 8 is followed again after the edge-on phase (frames ~30-45): 25 of the
+    # 25 frames 45-69, 2 without the row's map (lost at 47)
+    assert np.isfinite(a["error"][45:70, 8]).sum() >= 20
+    assert ok.sum() > 1230, ok.sum()  # 1256 (1206 without)
+
+
+def test_affine_from_a_row_does_not_place_markers_off_it():
+    # an affine map from neighbours on a line (spread 0.16 px across it: the row 8, 11,
+    # 14, 17 of edge_on's wing) leaves free where a marker 30 px off the row goes
+    row = np.array([150.7, 293.3]) + np.array([0.0, 1.0, 2.0, 3.0])[:, None] * (23.6, 16.9)
+    row[1] += (0.1, -0.15)
+    assert _determined(row[0] + 2.5 * np.array([23.6, 16.9]), row)  # on the row
+    assert not _determined(np.array([208.0, 300.0]), row)  # ~25 px off it
+    spread = np.vstack([row, [[170.0, 280.0], [200.0, 300.0]]])
+    assert _determined(np.array([208.0, 300.0]), spread)
+
+
+def test_edge_on_left_no_marker_reacquired_a_row_off(edge_on_dev1):
+    # DEV seed 1, left camera: after the wing's edge-on phase only the row 2, 5, 8, 11,
+    # 14, 17 was ok; the affine map from the reference frame fitted on 8, 11, 14, 17
+    # (rms 0.01 px) put markers 3, 6, 9, 12, 15 one row (~30 px) off, on their
+    # neighbours' blobs, ok from then on: 79 ok points 29-31 px off
+    seq = edge_on_dev1
+    tr = track_markers(seq.frames("left"), seq.picks("left"), camera="left", progress=False)
+    a = point_errors(tr, seq, "left")
+    ok = a["ok"] & np.isfinite(a["error"])
+    assert not (a["error"][ok] > 1.0).any(), np.argwhere(ok & (a["error"] > 1.0))[:5]

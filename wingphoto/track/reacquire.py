@@ -17,6 +17,24 @@ logger = logging.getLogger(__name__)
 #: A line prediction (:func:`_line_prediction`) needs its neighbours to fit their line's
 #: map within this RMS (px), like the affine maps of :func:`~.geometry._neighbour_prediction`.
 _LINE_RMS = 1.5
+#: Largest distance of a marker from its neighbours' line, in units of their spread across
+#: it, for an affine map from them to predict it (:func:`_determined`).
+_AMPLIFY = 4.0
+
+
+def _determined(p0, src):
+    """True when an affine map fitted on ``src`` (m, 2) determines where ``p0`` (2,) goes.
+
+    A map from neighbours on (or near) a line leaves free where the points off that line
+    go: ``p0``'s distance from their line may be at most :data:`_AMPLIFY` times the RMS
+    spread of the neighbours across it (the factor by which their position errors grow
+    in the prediction)."""
+    if len(src) < 3:
+        return False
+    c = src.mean(0)
+    _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
+    across = sv[1] / math.sqrt(len(src))
+    return abs(float((p0 - c) @ vt[1])) <= _AMPLIFY * across
 
 
 def _line_prediction(p0, src, dst, max_off):
@@ -109,7 +127,7 @@ class ReacquireStage:
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
             c1, prev = self._neighbours_then(i, ti, Pi, okn, res, alike_only=True)
-            if c1.size >= 2:
+            if c1.size >= 2 and (c1.size < 4 or _determined(Pi, prev)):
                 pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
                     logger.debug("frame %d: marker %d predicted from its neighbours then %s", t, i, c1.tolist())
@@ -133,6 +151,8 @@ class ReacquireStage:
                 near = order[:k]
                 if near.size < 4:
                     break
+                if not _determined(ref[i], ref[okn[near]]):
+                    continue  # (the neighbours on a line: 2b below)
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
                     logger.debug("frame %d: marker %d predicted from the reference frame by %s (rms %.2f)", t, i,
