@@ -107,17 +107,25 @@ class ReacquireStage:
         1. From its last reliable frame: the neighbours reliable then and now that moved
            like it then (when its motion then is known) map its last position to now
            (:func:`_neighbour_prediction`: a robust affine map or the mean displacement of
-           a group that moved alike). Short intervals keep this accurate on a bending,
-           pitching wing.
+           a group that moved alike; an affine map only where it determines the marker).
+           Short intervals keep this accurate on a bending, pitching wing.
         2. Else from the reference frame (the first frame of the pass, where every marker
            is known) by a robust affine map on its nearest reliable neighbours of its kind
            (moving ones for a marker that moved, still ones for one that did not): a planar
-           wing seen from afar moves by an affine map however much time has passed.
+           wing seen from afar moves by an affine map however much time has passed. An
+           affine map is used only where its neighbours determine it
+           (:func:`_determined`: not a marker off the line of neighbours on a row); a
+           marker on that line is mapped by the row's 1-D map (:func:`_line_prediction`),
+           from three neighbours on.
         3. An isolated marker (fewer than two other markers within ``self.local`` px in
            the reference frame, ok now or not - the two-marker rigid target, a reference
            dot) is searched for in a wide window
            (``search_radius``) at its last position, moved like its one neighbour if it has
            one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
+
+        The neighbours (``okn``) are the markers ok now, and those flagged only
+        ``imprecise`` that were certain on the last :data:`_ANCHOR_FRAMES` frames
+        (:meth:`_reacquire`).
         """
         p = self.p
         T = res.x.shape[0]
@@ -221,7 +229,7 @@ class ReacquireStage:
             r = self._predict_lost(i, okn, X, Y, res, t)
             if r is None:
                 logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
-            if r is not None:
+            else:
                 q[i] = r
                 est_x[i], est_y[i] = r[0]
         valid = np.isfinite(est_x)
