@@ -59,8 +59,8 @@ def test_edge_on_wing_reacquired_from_one_row(edge_on_dev1):
     a = point_errors(tr, seq, "right")
     ok = a["ok"] & a["visible"]
     assert not (a["error"][ok] > 1.0).any()
-    # marker 8 is followed again after the edge-on phase (frames ~30-45): 25 of the
-    # 25 frames 45-69, 2 without the row's map (lost at 47)
+    # marker 8 is followed again after the edge-on phase (frames ~30-45): at least 20 of
+    # the 25 frames 45-69, 2 without the row's map (lost at 47)
     assert np.isfinite(a["error"][45:70, 8]).sum() >= 20
     assert ok.sum() > 1230, ok.sum()  # 1256 (1206 without)
 

@@ -46,7 +46,7 @@ def test_real_dots_tracked_without_confident_errors():
     # re-acquired one grid pitch off, then ok when few neighbours were ok to vouch;
     # 0.63 since a lost dot is re-predicted only from neighbours that moved like it,
     # 87fc030, which re-acquires fewer dots and none onto another; ~0.3 before e54d535;
-    # 0.916 since dots flagged only imprecise, and certain on the last 5 frames, serve as
+    # 0.885 since dots flagged only imprecise, and certain on the last 5 frames, serve as
     # neighbours for re-acquisition: dots that leave the view and come back are found again)
     seq = realdots.render_realdots("cam2", seed=0)
     picks = seq.picks("cam2")
