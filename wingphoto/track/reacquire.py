@@ -1,6 +1,7 @@
 """Re-acquisition of long-lost markers from their neighbours."""
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -9,6 +10,90 @@ from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
 from .status import _R, _SOFT, FLAGGED, OK
+
+logger = logging.getLogger(__name__)
+
+
+#: A line prediction (:func:`_line_prediction`) needs its neighbours to fit their line's
+#: map within this RMS (px), like the affine maps of :func:`~.geometry._neighbour_prediction`.
+_LINE_RMS = 1.5
+#: Largest distance of a marker from its neighbours' line, in units of their spread across
+#: it, for an affine map from them to predict it (:func:`_determined`).
+_AMPLIFY = 4.0
+
+
+def _determined(p0, src):
+    """True when an affine map fitted on ``src`` (m, 2) determines where ``p0`` (2,) goes.
+
+    A map from neighbours on (or near) a line leaves free where the points off that line
+    go: ``p0``'s distance from their line may be at most :data:`_AMPLIFY` times the RMS
+    spread of the neighbours across it (the factor by which their position errors grow
+    in the prediction)."""
+    if len(src) < 3:
+        return False
+    c = src.mean(0)
+    _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
+    across = sv[1] / math.sqrt(len(src))
+    return abs(float((p0 - c) @ vt[1])) <= _AMPLIFY * across
+
+
+def _line_prediction(p0, src, dst, max_off):
+    """Map ``p0`` by the 1-D map of the line its neighbours form, if it lies on that line.
+
+    Parameters
+    ----------
+    p0 : (2,) ndarray of float
+        The marker's position in the reference frame, px.
+    src, dst : (m, 2) ndarray of float
+        Its neighbours' positions in the reference frame and now, px; m >= 3.
+    max_off : float
+        Largest distance (px) of ``p0`` from the neighbours' line in the reference frame.
+
+    Returns
+    -------
+    (2,) ndarray of float or None
+        The predicted position: the neighbours' positions along their line ``s`` map to
+        now by ``a + b s`` (least squares, RMS residual at most :data:`_LINE_RMS`); None
+        when ``p0`` is off the line, beyond the neighbours' span by more than that span,
+        or the neighbours are not nearly on a line or do not fit such a map.
+
+    Notes
+    -----
+    A planar wing moves by an affine map, but an affine map from neighbours on a line
+    leaves free where the points off that line go (the wing's fold about it): only
+    ``p0`` on the line is determined. An edge-on wing may leave only such a row of
+    markers ok, too few for :func:`~.geometry._robust_affine`: without this, a marker
+    lost there is never re-acquired, nor are those that need it as a neighbour.
+    """
+    c = src.mean(0)
+    _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
+    if sv[0] <= 0:
+        return None
+    u, nrm = vt[0], vt[1]
+    e = (src - c) @ nrm
+    if np.abs(e).max() > max_off:
+        return None  # not a line
+    s = (src - c) @ u
+    s0 = float((p0 - c) @ u)
+    span = float(s.max() - s.min())
+    if abs(float((p0 - c) @ nrm)) > max_off or not s.min() - span <= s0 <= s.max() + span:
+        return None
+    A = np.column_stack([np.ones(s.size), s])
+    coef, *_ = np.linalg.lstsq(A, dst, rcond=None)
+    rms = float(np.sqrt(np.mean(np.sum((A @ coef - dst) ** 2, axis=1))))
+    if rms > _LINE_RMS:
+        return None
+    return coef[0] + coef[1] * s0
+
+
+#: A marker flagged ``imprecise`` serves as a neighbour for re-acquisition only if it was
+#: ok or imprecise on each of the last _ANCHOR_FRAMES frames.
+_ANCHOR_FRAMES = 5
+
+
+def _certain(status, reason):
+    """True where a point's identity is certain: ok, or flagged only for its precision."""
+    return (status == OK) | ((status == FLAGGED) & (reason == _R["imprecise"]))
 
 
 class ReacquireStage:
@@ -22,17 +107,25 @@ class ReacquireStage:
         1. From its last reliable frame: the neighbours reliable then and now that moved
            like it then (when its motion then is known) map its last position to now
            (:func:`_neighbour_prediction`: a robust affine map or the mean displacement of
-           a group that moved alike). Short intervals keep this accurate on a bending,
-           pitching wing.
+           a group that moved alike; an affine map only where it determines the marker).
+           Short intervals keep this accurate on a bending, pitching wing.
         2. Else from the reference frame (the first frame of the pass, where every marker
            is known) by a robust affine map on its nearest reliable neighbours of its kind
            (moving ones for a marker that moved, still ones for one that did not): a planar
-           wing seen from afar moves by an affine map however much time has passed.
+           wing seen from afar moves by an affine map however much time has passed. An
+           affine map is used only where its neighbours determine it
+           (:func:`_determined`: not a marker off the line of neighbours on a row); a
+           marker on that line is mapped by the row's 1-D map (:func:`_line_prediction`),
+           from three neighbours on.
         3. An isolated marker (fewer than two other markers within ``self.local`` px in
            the reference frame, ok now or not - the two-marker rigid target, a reference
            dot) is searched for in a wide window
            (``search_radius``) at its last position, moved like its one neighbour if it has
            one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
+
+        The neighbours (``okn``) are the markers ok now, and those flagged only
+        ``imprecise`` that were certain on the last :data:`_ANCHOR_FRAMES` frames
+        (:meth:`_reacquire`).
         """
         p = self.p
         T = res.x.shape[0]
@@ -42,13 +135,14 @@ class ReacquireStage:
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
             c1, prev = self._neighbours_then(i, ti, Pi, okn, res, alike_only=True)
-            if c1.size >= 2:
+            if c1.size >= 2 and (c1.size < 4 or _determined(Pi, prev)):
                 pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
+                    logger.debug("frame %d: marker %d predicted from its neighbours then %s", t, i, c1.tolist())
                     return pq[0], p.reacquire_radius, p.reacquire_score, c1
         # 2. from the reference frame
         cur = np.column_stack([X[okn], Y[okn]])
-        if okn.size >= 4:
+        if okn.size >= 3:
             use = np.ones(okn.size, bool)
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
@@ -65,9 +159,21 @@ class ReacquireStage:
                 near = order[:k]
                 if near.size < 4:
                     break
+                if not _determined(ref[i], ref[okn[near]]):
+                    continue  # (the neighbours on a line: 2b below)
                 M, rms, nin = _robust_affine(ref[okn[near]], cur[near], quality=True)
                 if M is not None and nin >= 4 and rms <= 1.5:
+                    logger.debug("frame %d: marker %d predicted from the reference frame by %s (rms %.2f)", t, i,
+                                 okn[near].tolist(), rms)
                     return _apply_affine(M, ref[i][None, :])[0], p.reacquire_radius, p.reacquire_score, okn[near]
+            # 2b. too few of its kind for an affine map (a wing turning edge-on may leave
+            # only one row of markers ok): a marker on the line they form is still mapped
+            near = order[:6]
+            if near.size >= 3:
+                ql = _line_prediction(ref[i], ref[okn[near]], cur[near], 0.25 * float(self._spacing[i]))
+                if ql is not None:
+                    logger.debug("frame %d: marker %d predicted on the line of %s", t, i, okn[near].tolist())
+                    return ql, p.reacquire_radius, p.reacquire_score, okn[near]
         # 3. an isolated marker: fewer than two other markers near it in the reference
         # frame (not: fewer than two ok now - its neighbours may be lost with it)
         others = np.flatnonzero(np.isfinite(ref[:, 0]))
@@ -83,6 +189,15 @@ class ReacquireStage:
             q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
         return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
 
+    def _certain_lately(self, res, t, direction):
+        """Markers ok or only ``imprecise`` on each of the last :data:`_ANCHOR_FRAMES`
+        frames before ``t`` (in the pass's direction; frames before its first count)."""
+        T = res.x.shape[0]
+        rows = [t - direction * k for k in range(1, _ANCHOR_FRAMES + 1) if 0 <= t - direction * k < T]
+        if not rows:
+            return np.ones(res.x.shape[1], bool)
+        return _certain(res.status[rows], res.reason[rows]).all(0)
+
     def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred):
         """Search again for long-lost markers where their reliable neighbours put them.
 
@@ -93,7 +208,13 @@ class ReacquireStage:
         (it could be that marker's blob), and if its refinement finds no foreign blob.
         """
         p = self.p
-        okn = np.flatnonzero(ST == OK)
+        # the anchors: ok markers, and those flagged only for their precision
+        # (``imprecise`` is the first status rule: every identity rule passed)
+        # - followed without doubt on the last _ANCHOR_FRAMES frames: a marker just re-acquired
+        # (or coasting back) may still be on another's blob, and it would pass that on
+        anchor = (ST == OK) | ((ST == FLAGGED) & (RS == _R["imprecise"]) & np.isfinite(X)
+                              & self._certain_lately(res, t, direction))
+        okn = np.flatnonzero(anchor)
         if okn.size < 1:
             return
         lost = np.flatnonzero(self.lostflag)
@@ -106,7 +227,9 @@ class ReacquireStage:
         q = {}
         for i in lost.tolist():
             r = self._predict_lost(i, okn, X, Y, res, t)
-            if r is not None:
+            if r is None:
+                logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
+            else:
                 q[i] = r
                 est_x[i], est_y[i] = r[0]
         valid = np.isfinite(est_x)
@@ -134,6 +257,7 @@ class ReacquireStage:
             u, v, score, second, _ = _analyse_maps(maps, shp, np.array([ex]))
             sc = float(score[0])
             if not (sc >= min_sc and second[0] < sc - p.ambiguity_margin):
+                logger.debug("frame %d: marker %d: score %.2f, second %.2f", t, i, sc, second[0])
                 continue
             mx, my = float(origin[0, 0] + u[0]), float(origin[0, 1] + v[0])
             # joint test: this marker's prediction must be the nearest to the blob
@@ -144,6 +268,7 @@ class ReacquireStage:
                 do = np.hypot(est_x[others] - mx, est_y[others] - my).min()
                 dqo = np.hypot(est_x[others] - qi[0], est_y[others] - qi[1]).min()
                 if not (dq < do and dq <= max(3.0, 0.5 * dqo)):
+                    logger.debug("frame %d: marker %d: another prediction nearer (%.1f, %.1f, %.1f px)", t, i, dq, do, dqo)
                     continue
             # and no uncertain marker (flagged, or lost) may be near: the blob could be
             # its own, and a wrong re-acquisition would be confident from then on
@@ -174,6 +299,8 @@ class ReacquireStage:
                 break
             if okb:
                 accept.append(i)
+            else:
+                logger.debug("frame %d: marker %d: blocked by %s", t, i, blockers.tolist())
         for i in accept:
             mx, my, sc, _ = found[i]
             nbrs = q[i][3]
@@ -181,9 +308,10 @@ class ReacquireStage:
             # (a long interval: 4 px tolerance, a neighbour's blob is further)
             Xi, Yi = X[i], Y[i]
             X[i], Y[i] = mx, my
-            wrong = self._inconsistent(np.array([i]), X, Y, ST, res, t, min_lim=4.0).size > 0
+            wrong = self._inconsistent(np.array([i]), X, Y, np.where(anchor, OK, ST), res, t, min_lim=4.0).size > 0
             X[i], Y[i] = Xi, Yi
             if wrong:
+                logger.debug("frame %d: marker %d: inconsistent with its neighbours", t, i)
                 continue
             nb = None
             oth = np.flatnonzero(np.isfinite(X))
@@ -197,8 +325,10 @@ class ReacquireStage:
             rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
                                         rmax=self.rd[sel])
             if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
+                logger.debug("frame %d: marker %d: faint or foreign", t, i)
                 continue
             X[i], Y[i], S[i], XP[i], YP[i] = rx[0], ry[0], sc, mx, my
+            logger.debug("frame %d: marker %d re-acquired at (%.1f, %.1f), score %.2f", t, i, rx[0], ry[0], sc)
             ST[i] = FLAGGED
             RS[i] = _R["reacquired"]
             est_x[i], est_y[i] = rx[0], ry[0]
@@ -206,7 +336,7 @@ class ReacquireStage:
             tp = t - direction
             vel = np.zeros(2)
             if 0 <= tp < res.x.shape[0] and len(nbrs):
-                both = nbrs[res.status[tp, nbrs] == OK]
+                both = nbrs[_certain(res.status[tp, nbrs], res.reason[tp, nbrs])]
                 if both.size:
                     vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
             self.hist_x[i] = np.nan
