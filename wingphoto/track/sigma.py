@@ -30,10 +30,17 @@ SIGMA_FLOOR, SIGMA_NOISE, SIGMA_BACKGROUND, SIGMA_MATCH = 0.003, 1.8, 2.76, 0.05
 #: :data:`~.refine.SHAPE_CLIP`) beyond SHAPE_FLOOR (what a uniform marker shows from its
 #: pixels and blur alone: median 0.03 px on clean_glare, edge_on, hard_stroke)
 SIGMA_SHAPE, SHAPE_FLOOR = 0.5, 0.03
+#: the cut term: SIGMA_RIM times the share of the centroid's weight on the disk's rim
+#: (``rim``, see :data:`~.refine.RIM_WIDTH`) beyond RIM_FLOOR, times the blob radius: a
+#: motion streak longer than the disk, whose centre along the streak the blob does not fix
+SIGMA_RIM, RIM_FLOOR = 2.5, 0.02
+#: the texture term: SIGMA_TEX times the inner face's texture beyond the pixel noise
+#: (``tex``, see :data:`~.refine.TEX_INSET`) beyond TEX_FLOOR, times the blob radius
+SIGMA_TEX, TEX_FLOOR = 0.0, 0.0
 
 
 @jit
-def point_sigma(noise, spread, bgres, peak, score, rb, dshape):
+def point_sigma(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
     """Compiled sigma (px) of one point; NaN inputs give NaN, as :func:`sigma_numpy`."""
     s_noise = SIGMA_NOISE * noise * spread
     s_bg = SIGMA_BACKGROUND * bgres * peak * spread
@@ -42,10 +49,13 @@ def point_sigma(noise, spread, bgres, peak, score, rb, dshape):
         m = min(max(m, 0.0), 1.0)
     s_match = SIGMA_MATCH * m * rb
     s_shape = SIGMA_SHAPE * max(dshape - SHAPE_FLOOR, 0.0) if not np.isnan(dshape) else np.nan
-    return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape)
+    s_rim = SIGMA_RIM * max(rim - RIM_FLOOR, 0.0) * rb if not np.isnan(rim) else np.nan
+    s_tex = SIGMA_TEX * max(tex - TEX_FLOOR, 0.0) * rb if not np.isnan(tex) else np.nan
+    return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape
+                   + s_rim * s_rim + s_tex * s_tex)
 
 
-def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
+def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
     """numpy twin of :func:`point_sigma` (arrays, or scalars broadcast).
 
     Parameters
@@ -64,6 +74,10 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
         Blob radius (px).
     dshape : ndarray
         How far the centre moves when the weights are flattened (px).
+    rim : ndarray
+        Share of the centroid's weight on the disk's rim (a blob the disk cuts).
+    tex : ndarray
+        Texture of the blob's inner face beyond the pixel noise (relative to its mean).
 
     Returns
     -------
@@ -75,4 +89,7 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape):
         s_bg = SIGMA_BACKGROUND * bgres * peak * spread
         s_match = SIGMA_MATCH * np.clip(1.0 - np.asarray(score, float), 0.0, 1.0) * rb
         s_shape = SIGMA_SHAPE * np.maximum(dshape - SHAPE_FLOOR, 0.0)
-        return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2)
+        s_rim = SIGMA_RIM * np.maximum(rim - RIM_FLOOR, 0.0) * rb
+        s_tex = SIGMA_TEX * np.maximum(tex - TEX_FLOOR, 0.0) * rb
+        return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2 + s_rim ** 2
+                       + s_tex ** 2)
