@@ -40,7 +40,7 @@ def test_sigma_on_specular_markers_at_measured_level():
 LEVEL_SPECULAR = 0.70
 
 
-def _streak(length, rng, shape=(61, 53), centre=(26.3, 30.2), diameter=5.0):
+def _streak(length, rng, shape=(61, 53), centre=(26.3, 30.2), diameter=8.0):
     """A disc swept ``length`` px along y (a motion streak, the truth its middle) + noise."""
     from wingphoto.synth import render_discs
 
@@ -65,7 +65,8 @@ def test_sigma_says_when_the_disk_cuts_a_motion_streak(use_numba):
     if use_numba and not engine.NUMBA_AVAILABLE:
         pytest.skip("numba not installed")
     rng = np.random.default_rng(11)
-    rd, rb = 7.5, 4.5
+    rb = 4.0  # the disc's radius; the tracker's disk is 3 px larger
+    rd = rb + 3.0
     was = engine.use_numba()
     engine.try_numba(use_numba)
     try:
