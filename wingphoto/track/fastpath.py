@@ -269,9 +269,11 @@ def _build(key):
         valley = np.full(n, np.nan)
         spread = np.full(n, np.nan)
         dshape = np.full(n, np.nan)
+        rim = np.full(n, np.nan)
+        tex = np.full(n, np.nan)
         nb = np.full((n, 2), np.nan)
         _refine_all_kernel(frame, idx, XP, YP, j2[:, 0], rd, rb, sign, noise, 2, WEIGHT_FRACTION, FOREIGN_FRACTION,
-                           FOREIGN_NOISE, X, Y, mass, foreign, bgres, peak, valley, spread, dshape, nb)
+                           FOREIGN_NOISE, X, Y, mass, foreign, bgres, peak, valley, spread, dshape, rim, tex, nb)
         for i in range(n):
             if foreign[i]:
                 return 6
@@ -319,7 +321,7 @@ def _build(key):
         sig = np.empty(n)
         imprecise = np.empty(n, np.bool_)
         for i in range(n):
-            sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i])
+            sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i], rim[i], tex[i])
             faded = (peak[i] < fpar[3] * peak0[i]) or (S[i] < fpar[4])
             imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[5])
         lose = np.zeros(n, np.bool_)

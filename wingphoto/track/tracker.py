@@ -105,7 +105,7 @@ class FrameContext:
         Summed signal above the background of the refined blob (NaN: not refined).
     info : dict of (N,) ndarray
         The refiner's diagnostics: ``foreign``, ``rd``, ``bgres``, ``peak``, ``valley``,
-        ``spread``, ``dshape`` (:func:`~.refine._refine`).
+        ``spread``, ``dshape``, ``rim``, ``tex`` (:func:`~.refine._refine`).
     ST, RS : (N,) ndarray of int8
         Status and reason code (:mod:`~.status`), set by :meth:`Tracker._judge`.
     resid : (N,) ndarray of float
@@ -313,7 +313,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         # better centre for the template and the motion model
         self.pick_moved = ((np.hypot(x - xy[:, 0], y - xy[:, 1]) > 1.5) | info["foreign"]
                            | (info["bgres"] > _BG_RESIDUAL))
-        self.sigma0 = sigma_numpy(nz, info["spread"], info["bgres"], info["peak"], 1.0, rb, info["dshape"])
+        self.sigma0 = sigma_numpy(nz, info["spread"], info["bgres"], info["peak"], 1.0, rb, info["dshape"],
+                                  info["rim"], info["tex"])
         self.sigma0[self.pick_moved] = np.nan  # the click, kept: its uncertainty is the user's
         x = np.where(self.pick_moved, xy[:, 0], x)
         y = np.where(self.pick_moved, xy[:, 1], y)
@@ -491,7 +492,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
             X=np.full(n, np.nan), Y=np.full(n, np.nan), mass=np.full(n, np.nan),
             info=dict(foreign=np.zeros(n, bool), rd=self.rd.copy(), bgres=np.zeros(n), peak=np.full(n, np.nan),
-                      valley=np.full(n, np.nan), spread=np.full(n, np.nan), dshape=np.full(n, np.nan)),
+                      valley=np.full(n, np.nan), spread=np.full(n, np.nan), dshape=np.full(n, np.nan),
+                      rim=np.full(n, np.nan), tex=np.full(n, np.nan)),
             ST=np.full(n, LOST, np.int8), RS=RS)
 
     def _match_all(self, frame, ctx):
@@ -762,7 +764,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         """Per-axis 1-sigma uncertainty (px) of each refined position, from the image
         (:func:`~.sigma.sigma_numpy`; the terms and their gains are described there)."""
         info = ctx.info
-        return sigma_numpy(self.noise, info["spread"], info["bgres"], info["peak"], ctx.S, self.rb, info["dshape"])
+        return sigma_numpy(self.noise, info["spread"], info["bgres"], info["peak"], ctx.S, self.rb, info["dshape"],
+                           info["rim"], info["tex"])
 
     def _rmax(self):
         """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""
@@ -779,7 +782,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         foreign = np.zeros(n, np.bool_)
         _refine_all_kernel(frame, idx, XP, YP, jn, self.rd, self.rb, self.sign64, self.noise, 2, WEIGHT_FRACTION,
                            FOREIGN_FRACTION, FOREIGN_NOISE, X, Y, mass, foreign, info["bgres"], info["peak"],
-                           info["valley"], info["spread"], info["dshape"], nb)
+                           info["valley"], info["spread"], info["dshape"], info["rim"], info["tex"], nb)
         info["foreign"] = foreign
         # a foreign blob next to a steady marker: split off like a neighbour (rare)
         cand = idx[foreign[idx] & (mass[idx] > 0)]
@@ -792,7 +795,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                                           nb[cand], 2, rmax=self.rd[cand], nbr_r=ctx.nbr_r[cand],
                                           explain=np.ones(cand.size, bool))
                 X[cand], Y[cand], mass[cand] = xx, yy, mm
-                for k in ("foreign", "bgres", "peak", "valley", "spread", "dshape"):
+                for k in ("foreign", "bgres", "peak", "valley", "spread", "dshape", "rim", "tex"):
                     info[k][cand] = inf[k]
         return nb
 
@@ -815,6 +818,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         info["valley"][idx] = inf["valley"]
         info["spread"][idx] = inf["spread"]
         info["dshape"][idx] = inf["dshape"]
+        info["rim"][idx] = inf["rim"]
+        info["tex"][idx] = inf["tex"]
         info["rd"][idx] = inf["rd"]
         return x, y, m
 
