@@ -42,6 +42,8 @@ _CONSTELLATION = 0.5
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
+#: The refiner's per-marker diagnostics kept in ``FrameContext.info`` (:func:`~.refine._refine`).
+_DIAGNOSTICS = ("foreign", "bgres", "peak", "valley", "spread", "dshape", "rim", "tex")
 
 
 @dataclass(eq=False)
@@ -795,7 +797,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                                           nb[cand], 2, rmax=self.rd[cand], nbr_r=ctx.nbr_r[cand],
                                           explain=np.ones(cand.size, bool))
                 X[cand], Y[cand], mass[cand] = xx, yy, mm
-                for k in ("foreign", "bgres", "peak", "valley", "spread", "dshape", "rim", "tex"):
+                for k in _DIAGNOSTICS:
                     info[k][cand] = inf[k]
         return nb
 
@@ -811,16 +813,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                                     <= 2.0 + 2.0 * self.resid_rms[idx])
         x, y, m, inf = _refine(frame, XP[idx], YP[idx], self.rd[idx], self.sign[idx], self.noise[idx], nb[idx], 2,
                                rmax=self.rd[idx], nbr_r=ctx.nbr_r[idx], explain=steady)
-        info = ctx.info
-        info["foreign"][idx] = inf["foreign"]
-        info["bgres"][idx] = inf["bgres"]
-        info["peak"][idx] = inf["peak"]
-        info["valley"][idx] = inf["valley"]
-        info["spread"][idx] = inf["spread"]
-        info["dshape"][idx] = inf["dshape"]
-        info["rim"][idx] = inf["rim"]
-        info["tex"][idx] = inf["tex"]
-        info["rd"][idx] = inf["rd"]
+        for k in _DIAGNOSTICS + ("rd",):
+            ctx.info[k][idx] = inf[k]
         return x, y, m
 
     def _voronoi(self, ctx):
