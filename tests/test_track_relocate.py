@@ -124,3 +124,13 @@ def test_fit_finds_identities_among_clutter():
 def test_fit_refuses_too_few_candidates():
     ref = _wing(np.random.default_rng(1), 8)
     assert fit_constellation(ref, ref[:2]) is None
+
+
+def test_fit_of_a_regular_grid_is_ambiguous():
+    """A regular grid fits its candidates shifted by one pitch nearly as well as right:
+    the margin test must see the second fit (a wrong re-acquisition is worse than none)."""
+    g = np.stack(np.meshgrid(np.arange(4) * 20.0, np.arange(4) * 20.0), -1).reshape(-1, 2) + 50
+    cand = g + [3.0, -2.0] + np.random.default_rng(2).normal(0, 0.2, g.shape)
+    fit = fit_constellation(g, cand)
+    assert fit["inliers"] == 16
+    assert fit["second"] > relocate.MARGIN * fit["inliers"]

@@ -307,6 +307,19 @@ def _velocity(prev, frame, pts, radius, half=PATCH_HALF):
     return pts - _apply_affine(M, np.asarray(pts, float))
 
 
+def _was_moving(tr):
+    """Markers that were moving when last seen - away from their reference position, or
+    faster than 0.3 px a frame - as :mod:`.reacquire` tells the wing from the static dots
+    (a static dot hidden by the wing is not fitted with the wing's constellation)."""
+    p0 = tr.hist_x[:, 0]
+    away = np.hypot(p0[:, 0] - tr.ref_pos[:, 0], p0[:, 1] - tr.ref_pos[:, 1]) >= 1.5
+    dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1]).astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.hypot(*(tr.hist_x[:, 0] - tr.hist_x[:, 1]).T) / dt
+    fast = (tr.nh >= 2) & (dt > 0) & (v >= 0.3)
+    return away | fast
+
+
 def _moving(tr, X, Y, ok):
     """Ok markers that moved from their reference position (the wing, not the static dots)."""
     return ok & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= 1.5)
@@ -337,8 +350,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     Notes
     -----
     Runs only on a steady frame (no glitch, no hypothesis of dropped or repeated frames)
-    when at least :data:`MIN_GROUP` markers are lost and fewer than :data:`MAX_OK_MOVING`
-    moving markers are ok. The candidates exclude the blobs of every marker with a
+    when at least :data:`MIN_GROUP` markers that were moving when last seen (the wing, not
+    the static dots) are lost and fewer than :data:`MAX_OK_MOVING` moving markers are ok. The candidates exclude the blobs of every marker with a
     position on this frame; the fit (:func:`fit_constellation`) must place at least
     :data:`MIN_INLIERS` and :data:`MIN_SHARE` of the group, with the best different fit
     at most :data:`MARGIN` of its inliers. Each marker then needs its own template's
@@ -349,7 +362,7 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     if ctx.glitch or ctx.aged != 0:
         return none
     X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
-    group = np.flatnonzero(tr.lostflag & np.isfinite(tr.ref_pos[:, 0]))
+    group = np.flatnonzero(tr.lostflag & np.isfinite(tr.ref_pos[:, 0]) & _was_moving(tr))
     if group.size < MIN_GROUP or _moving(tr, X, Y, ST == OK).sum() >= MAX_OK_MOVING:
         return none
     s = tr.tz.shape[1]
