@@ -35,8 +35,9 @@ logger = logging.getLogger("wingphoto.track")
 
 #: At least this many markers lost together make a group worth searching for as a whole.
 MIN_GROUP = 6
-#: The group is searched for only while fewer than this many moving markers are ok (with
-#: four, :mod:`.reacquire` maps the lost ones from them).
+#: The group is searched for only while fewer than this many moving markers have a
+#: position on the frame (ok or flagged: with four ok, :mod:`.reacquire` maps the lost
+#: ones from them; a sheet of faint dots, flagged but followed, is not a lost group).
 MAX_OK_MOVING = 4
 #: A candidate blob: a peak of the group template's correlation of at least this.
 CANDIDATE_SCORE = 0.6
@@ -55,6 +56,11 @@ MARKER_SCORE = 0.8
 #: A hypothesis's linear part: singular values within these bounds (scale from the picks'
 #: frame), and at most this ratio between them (foreshortening).
 SCALE_RANGE, MAX_ANISOTROPY = (0.4, 2.5), 4.0
+#: Hypotheses from at most MAX_ANCHORS reference triangles, scored on at most MAX_PROBE
+#: reference points (both spread over the group).
+MAX_ANCHORS, MAX_PROBE = 8, 30
+#: A group that is not found is searched for again on every RETRY-th frame only.
+RETRY = 2
 #: Velocity of the markers found: a patch of 2 PATCH_HALF + 1 px around each is found in
 #: the previous frame (correlation at least VEL_SCORE); an affine map of the patches'
 #: motion must hold for VEL_SHARE of them within VEL_RMS px.
@@ -104,6 +110,21 @@ def find_candidates(frame, template, *, min_score=CANDIDATE_SCORE, radius=2, exc
         xy, sc = xy[keep], sc[keep]
     o = np.argsort(-sc, kind="stable")[:max_n]
     return xy[o], sc[o]
+
+
+def _spread(pts, k):
+    """Indices of at most ``k`` of the points ``pts`` (n, 2), spread over them (farthest
+    point sampling from the first)."""
+    n = len(pts)
+    if n <= k:
+        return np.arange(n)
+    pick = [0]
+    d = np.hypot(*(pts - pts[0]).T)
+    for _ in range(k - 1):
+        j = int(np.argmax(d))
+        pick.append(j)
+        d = np.minimum(d, np.hypot(*(pts - pts[j]).T))
+    return np.array(sorted(pick), np.int64)
 
 
 def _triangles(ref):
@@ -191,7 +212,7 @@ def _refine_fit(ref, cand, tree, M, tol):
     return a, mapped, rms
 
 
-def fit_constellation(ref, cand, *, n_keep=12):
+def fit_constellation(ref, cand, *, n_keep=8):
     """Fit a reference constellation to candidate blobs whose identities are unknown.
 
     Parameters
@@ -214,10 +235,11 @@ def fit_constellation(ref, cand, *, n_keep=12):
     Notes
     -----
     Hypotheses: the affine map of each reference triangle (a point and its two nearest
-    others) onto each triangle of candidates (a candidate and two of its five nearest),
+    others) onto each triangle of candidates (a candidate and two of its four nearest),
     kept when it preserves orientation, with a scale in :data:`SCALE_RANGE` and at most
-    :data:`MAX_ANISOTROPY` of foreshortening; scored by the reference points mapped within
-    ``HYP_TOL`` spacings of a candidate; the best ``n_keep`` refined by iterated
+    :data:`MAX_ANISOTROPY` of foreshortening (at most :data:`MAX_ANCHORS` reference
+    triangles, spread over the group); scored by the reference points (at most
+    :data:`MAX_PROBE`, spread) mapped within ``HYP_TOL`` spacings of a candidate; the best ``n_keep`` refined by iterated
     association (affine, then a homography at :data:`FIT_TOL` px).
     """
     ref = np.asarray(ref, np.float64)
@@ -232,8 +254,12 @@ def fit_constellation(ref, cand, *, n_keep=12):
     tri = _triangles(ref)
     if not len(tri):
         return None
+    # a few anchor triangles spread over the group, and at most MAX_PROBE points to score
+    # the hypotheses with (the cost of a large group, a sheet of dots, stays bounded)
+    tri = tri[_spread(ref[tri[:, 0]], MAX_ANCHORS)]
+    probe = _spread(ref, MAX_PROBE)
     ctree = cKDTree(cand)
-    kk = min(6, m)
+    kk = min(5, m)
     _, cnn = ctree.query(cand, k=kk)
     # candidate triangles: a candidate and an ordered pair of its nearest others
     pairs = np.array([(b, c) for b in range(1, kk) for c in range(1, kk) if b != c], np.int64)
@@ -247,16 +273,16 @@ def fit_constellation(ref, cand, *, n_keep=12):
     M = M[good]
     if not len(M):
         return None
-    mapped = np.einsum("kij,nj->kni", M[:, :, :2], ref) + M[:, None, :, 2]
+    mapped = np.einsum("kij,nj->kni", M[:, :, :2], ref[probe]) + M[:, None, :, 2]
     d, _ = ctree.query(mapped.reshape(-1, 2), k=1)
-    score = (d.reshape(len(M), n) <= tol).sum(1)
+    score = (d.reshape(len(M), len(probe)) <= tol).sum(1)
     top = np.argsort(-score, kind="stable")
     fits = []
     for k in top.tolist():
         if len(fits) >= n_keep or score[k] < 3:
             break
         # one refinement per distinct outcome
-        if any(np.median(np.hypot(*(mapped[k] - f[1]).T)) < 0.33 * spacing for f in fits):
+        if any(np.median(np.hypot(*(mapped[k] - f[1][probe]).T)) < 0.33 * spacing for f in fits):
             continue
         a, mp, rms = _refine_fit(ref, cand, ctree, M[k], tol)
         fits.append((a, mp, rms))
@@ -320,9 +346,10 @@ def _was_moving(tr):
     return away | fast
 
 
-def _moving(tr, X, Y, ok):
-    """Ok markers that moved from their reference position (the wing, not the static dots)."""
-    return ok & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= 1.5)
+def _moving(tr, X, Y, sel):
+    """Markers ``sel`` (bool) that moved from their reference position (the wing, not the
+    static dots)."""
+    return sel & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= 1.5)
 
 
 def relocate_group(tr, frame, t, res, direction, ctx):
@@ -349,9 +376,11 @@ def relocate_group(tr, frame, t, res, direction, ctx):
 
     Notes
     -----
-    Runs only on a steady frame (no glitch, no hypothesis of dropped or repeated frames)
+    Runs only on a steady frame (no glitch, no hypothesis of dropped or repeated frames;
+    every :data:`RETRY`-th frame, to bound its cost)
     when at least :data:`MIN_GROUP` markers that were moving when last seen (the wing, not
-    the static dots) are lost and fewer than :data:`MAX_OK_MOVING` moving markers are ok. The candidates exclude the blobs of every marker with a
+    the static dots) are lost and fewer than :data:`MAX_OK_MOVING` moving markers have a
+    position on this frame. The candidates exclude the blobs of every marker with a
     position on this frame; the fit (:func:`fit_constellation`) must place at least
     :data:`MIN_INLIERS` and :data:`MIN_SHARE` of the group, with the best different fit
     at most :data:`MARGIN` of its inliers. Each marker then needs its own template's
@@ -359,11 +388,11 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     mass with no foreign blob, within :data:`FIT_TOL` + 1 px of the fit.
     """
     none = np.zeros(0, np.int64)
-    if ctx.glitch or ctx.aged != 0:
+    if ctx.glitch or ctx.aged != 0 or t % RETRY:
         return none
     X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
     group = np.flatnonzero(tr.lostflag & np.isfinite(tr.ref_pos[:, 0]) & _was_moving(tr))
-    if group.size < MIN_GROUP or _moving(tr, X, Y, ST == OK).sum() >= MAX_OK_MOVING:
+    if group.size < MIN_GROUP or _moving(tr, X, Y, np.isfinite(X)).sum() >= MAX_OK_MOVING:
         return none
     s = tr.tz.shape[1]
     tmpl = tr.tz[group].mean(0)
