@@ -35,9 +35,10 @@ logger = logging.getLogger("wingphoto.track")
 
 #: At least this many markers lost together make a group worth searching for as a whole.
 MIN_GROUP = 6
-#: The group is searched for only while fewer than this many moving markers have a
-#: position on the frame (ok or flagged: with four ok, :mod:`.reacquire` maps the lost
-#: ones from them; a sheet of faint dots, flagged but followed, is not a lost group).
+#: The group is searched for only while fewer than this many moving markers are ok (with
+#: four, :mod:`.reacquire` maps the lost ones from them) and fewer moving markers have a
+#: position on the frame (ok or flagged) than are lost (a sheet of faint dots, flagged
+#: but followed, is not a lost group).
 MAX_OK_MOVING = 4
 #: A candidate blob: a peak of the group template's correlation of at least this.
 CANDIDATE_SCORE = 0.6
@@ -58,7 +59,7 @@ MARKER_SCORE = 0.8
 SCALE_RANGE, MAX_ANISOTROPY = (0.4, 2.5), 4.0
 #: Hypotheses from at most MAX_ANCHORS reference triangles, scored on at most MAX_PROBE
 #: reference points (both spread over the group).
-MAX_ANCHORS, MAX_PROBE = 8, 30
+MAX_ANCHORS, MAX_PROBE = 6, 20
 #: A group that is not found is searched for again on every RETRY-th frame only.
 RETRY = 2
 #: Velocity of the markers found: a patch of 2 PATCH_HALF + 1 px around each is found in
@@ -239,8 +240,9 @@ def fit_constellation(ref, cand, *, n_keep=8):
     kept when it preserves orientation, with a scale in :data:`SCALE_RANGE` and at most
     :data:`MAX_ANISOTROPY` of foreshortening (at most :data:`MAX_ANCHORS` reference
     triangles, spread over the group); scored by the reference points (at most
-    :data:`MAX_PROBE`, spread) mapped within ``HYP_TOL`` spacings of a candidate; the best ``n_keep`` refined by iterated
-    association (affine, then a homography at :data:`FIT_TOL` px).
+    :data:`MAX_PROBE`, spread) mapped within ``HYP_TOL`` spacings of a candidate; the
+    best ``n_keep`` distinct ones refined by iterated association (affine, then a
+    homography at :data:`FIT_TOL` px).
     """
     ref = np.asarray(ref, np.float64)
     cand = np.asarray(cand, np.float64)
@@ -295,7 +297,8 @@ def fit_constellation(ref, cand, *, n_keep=8):
     for i, f in enumerate(fits):
         if i != b and np.median(np.hypot(*(f[1] - mp).T)) >= 0.33 * spacing:
             second = max(second, key[i][0])
-    return dict(assign=a, mapped=mp, inliers=int((a >= 0).sum()), rms=rms, second=second, spacing=spacing)
+    return {"assign": a, "mapped": mp, "inliers": int((a >= 0).sum()), "rms": rms, "second": second,
+            "spacing": spacing}
 
 
 def _velocity(prev, frame, pts, radius, half=PATCH_HALF):
@@ -377,11 +380,11 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     Notes
     -----
     Runs only on a steady frame (no glitch, no hypothesis of dropped or repeated frames;
-    every :data:`RETRY`-th frame, to bound its cost)
-    when at least :data:`MIN_GROUP` markers that were moving when last seen (the wing, not
-    the static dots) are lost and fewer than :data:`MAX_OK_MOVING` moving markers have a
-    position on this frame. The candidates exclude the blobs of every marker with a
-    position on this frame; the fit (:func:`fit_constellation`) must place at least
+    every :data:`RETRY`-th frame, to bound its cost) when at least :data:`MIN_GROUP`
+    markers that were moving when last seen (the wing, not the static dots) are lost,
+    fewer than :data:`MAX_OK_MOVING` moving markers are ok and fewer moving markers have
+    a position on this frame than are lost. The candidates exclude the blobs of every
+    marker with a position on this frame; the fit (:func:`fit_constellation`) must place at least
     :data:`MIN_INLIERS` and :data:`MIN_SHARE` of the group, with the best different fit
     at most :data:`MARGIN` of its inliers. Each marker then needs its own template's
     correlation of at least :data:`MARKER_SCORE` at its candidate, a refined blob of its
@@ -392,9 +395,9 @@ def relocate_group(tr, frame, t, res, direction, ctx):
         return none
     X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
     group = np.flatnonzero(tr.lostflag & np.isfinite(tr.ref_pos[:, 0]) & _was_moving(tr))
-    if group.size < MIN_GROUP or _moving(tr, X, Y, np.isfinite(X)).sum() >= MAX_OK_MOVING:
+    if (group.size < MIN_GROUP or _moving(tr, X, Y, ST == OK).sum() >= MAX_OK_MOVING
+            or _moving(tr, X, Y, np.isfinite(X)).sum() >= group.size):
         return none
-    s = tr.tz.shape[1]
     tmpl = tr.tz[group].mean(0)
     if not np.any(tmpl):
         return none
@@ -419,7 +422,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     ci = np.rint(cxy).astype(np.int64)
     h = tr.h[sel]
     W, H = tr.W, tr.H
-    inside = (ci[:, 0] - h - 2 >= 0) & (ci[:, 1] - h - 2 >= 0) & (ci[:, 0] + h + 2 <= W - 1) & (ci[:, 1] + h + 2 <= H - 1)
+    inside = ((ci[:, 0] - h - 2 >= 0) & (ci[:, 1] - h - 2 >= 0) & (ci[:, 0] + h + 2 <= W - 1)
+              & (ci[:, 1] + h + 2 <= H - 1))
     sel, cxy, fx, ci = sel[inside], cxy[inside], fx[inside], ci[inside]
     if not sel.size:
         return none
