@@ -15,6 +15,7 @@ from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
 from .predict import shift_history, start_frame, update_model
 from .reacquire import ReacquireStage
+from .relocate import relocate_group
 from .refine import (
     FOREIGN_FRACTION,
     FOREIGN_NOISE,
@@ -735,6 +736,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             self._refresh_templates(frame, t, X, Y, upd)
         if self.lostflag.any() and not ctx.glitch:
             self._reacquire(frame, t, res, direction, X, Y, S, ctx.XP, ctx.YP, ST, RS, ctx.pred)
+        if self.lostflag.any() and not ctx.glitch:
+            relocate_group(self, frame, t, res, direction, ctx)  # a whole group lost at once
         res.x[t], res.y[t], res.score[t] = X, Y, S
         res.xpix[t], res.ypix[t] = ctx.XP, ctx.YP
         res.status[t], res.reason[t] = ST, RS
