@@ -134,3 +134,15 @@ def test_fit_of_a_regular_grid_is_ambiguous():
     fit = fit_constellation(g, cand)
     assert fit["inliers"] == 16
     assert fit["second"] > relocate.MARGIN * fit["inliers"]
+
+
+def test_search_backs_off_the_longer_a_group_is_lost():
+    from wingphoto.track.relocate import MAX_BACKOFF, RETRY, RETRY_SPAN, _due
+
+    def searched(lost_for):
+        return sum(_due(t, lost_for) for t in range(64))
+
+    assert searched(0) == 64 // RETRY  # just lost: every RETRY-th frame
+    assert searched(RETRY_SPAN) == 64 // (2 * RETRY)
+    assert searched(10_000) == 64 // (RETRY * MAX_BACKOFF)
+    assert all(searched(a) >= searched(b) for a, b in zip(range(0, 200, 7), range(7, 207, 7)))

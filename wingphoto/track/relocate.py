@@ -60,8 +60,12 @@ SCALE_RANGE, MAX_ANISOTROPY = (0.4, 2.5), 4.0
 #: Hypotheses from at most MAX_ANCHORS reference triangles, scored on at most MAX_PROBE
 #: reference points (both spread over the group).
 MAX_ANCHORS, MAX_PROBE = 6, 20
-#: A group that is not found is searched for again on every RETRY-th frame only.
-RETRY = 2
+#: A group that is not found is searched for again on every RETRY-th frame only, and
+#: less often the longer it has been lost (:func:`_due`): RETRY frames apart during the
+#: first RETRY_SPAN frames, then twice, four and at most MAX_BACKOFF times as far apart
+#: (a search costs ~40 ms; real dots that left the view were searched for 20 times in 60
+#: frames, 5x the tracking time).
+RETRY, RETRY_SPAN, MAX_BACKOFF = 2, 8, 8
 #: Velocity of the markers found: a patch of 2 PATCH_HALF + 1 px around each is found in
 #: the previous frame (correlation at least VEL_SCORE); an affine map of the patches'
 #: motion must hold for VEL_SHARE of them within VEL_RMS px.
@@ -355,6 +359,18 @@ def _moving(tr, X, Y, sel):
     return sel & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= 1.5)
 
 
+def _due(t, lost_for):
+    """Whether a group lost for ``lost_for`` frames is searched for on frame ``t``.
+
+    Stateless (a function of the frame and of the motion model's history, which a
+    checkpoint saves), so a resumed run searches on the same frames as an uninterrupted one.
+    """
+    backoff = 1
+    while backoff < MAX_BACKOFF and lost_for >= RETRY_SPAN * (2 * backoff - 1):
+        backoff *= 2
+    return t % (RETRY * backoff) == 0
+
+
 def relocate_group(tr, frame, t, res, direction, ctx):
     """Find a group of markers lost together again by its reference constellation.
 
@@ -380,7 +396,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     Notes
     -----
     Runs only on a steady frame (no glitch, no hypothesis of dropped or repeated frames;
-    every :data:`RETRY`-th frame, to bound its cost) when at least :data:`MIN_GROUP`
+    every :data:`RETRY`-th frame and less often the longer the group has been lost,
+    :func:`_due`, to bound its cost) when at least :data:`MIN_GROUP`
     markers that were moving when last seen (the wing, not the static dots) are lost,
     fewer than :data:`MAX_OK_MOVING` moving markers are ok and fewer moving markers have
     a position on this frame than are lost. The candidates exclude the blobs of every
@@ -395,6 +412,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
         return none
     X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
     group = np.flatnonzero(tr.lostflag & np.isfinite(tr.ref_pos[:, 0]) & _was_moving(tr))
+    if group.size and not _due(t, int(np.min(np.abs(t - tr.hist_t[group, 0])))):
+        return none
     if (group.size < MIN_GROUP or _moving(tr, X, Y, ST == OK).sum() >= MAX_OK_MOVING
             or _moving(tr, X, Y, np.isfinite(X)).sum() >= group.size):
         return none
