@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from .geometry import _apply_affine, _robust_affine
 from .refine import _refine
-from .sigma import sigma_numpy
+from .sigma import sigma_of
 from .status import _R, FLAGGED, OK
 
 __all__ = ["find_candidates", "fit_constellation", "relocate_group"]
@@ -479,8 +479,7 @@ def relocate_group(tr, frame, t, res, direction, ctx):
             continue
         if not np.hypot(rx[0] - fxi[0], ry[0] - fxi[1]) <= FIT_TOL + 1.0:
             continue
-        out.append((i, rx[0], ry[0], sc, mx, my, float(sigma_numpy(tr.noise[one], inf["spread"], inf["bgres"],
-                                                                    inf["peak"], sc, tr.rb[one], inf["dshape"])[0])))
+        out.append((i, rx[0], ry[0], sc, mx, my, float(sigma_of(tr.noise[one], inf, sc, tr.rb[one])[0])))
     if len(out) < MIN_INLIERS:
         return none
     prev = tr._prev

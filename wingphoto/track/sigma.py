@@ -44,7 +44,7 @@ import numpy as np
 
 from .engine import jit
 
-__all__ = ["point_sigma", "sigma_numpy"]
+__all__ = ["point_sigma", "sigma_numpy", "sigma_of"]
 
 #: floor (px) and the gains of the noise, background and match terms
 SIGMA_FLOOR, SIGMA_NOISE, SIGMA_BACKGROUND, SIGMA_MATCH = 0.003, 1.8, 2.2, 0.04
@@ -117,3 +117,11 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
         s_tex = SIGMA_TEX * np.maximum(np.minimum(tex, TEX_CAP) - TEX_FLOOR, 0.0) * rb
         return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2 + s_rim ** 2
                        + s_tex ** 2)
+
+
+def sigma_of(noise, info, score, rb):
+    """:func:`sigma_numpy` of refined points from the refiner's diagnostics ``info`` (the
+    dict :func:`~.refine._refine` returns, or a frame's ``FrameContext.info``), their
+    image noise, NCC score (1.0 at a pick) and blob radius."""
+    return sigma_numpy(noise, info["spread"], info["bgres"], info["peak"], score, rb, info["dshape"], info["rim"],
+                       info["tex"])

@@ -24,7 +24,7 @@ from .refine import (
     _refine,
     _refine_all_kernel,
 )
-from .sigma import sigma_numpy
+from .sigma import sigma_of
 from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
 from .templates import TemplateStage
 
@@ -316,8 +316,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         # better centre for the template and the motion model
         self.pick_moved = ((np.hypot(x - xy[:, 0], y - xy[:, 1]) > 1.5) | info["foreign"]
                            | (info["bgres"] > _BG_RESIDUAL))
-        self.sigma0 = sigma_numpy(nz, info["spread"], info["bgres"], info["peak"], 1.0, rb, info["dshape"],
-                                  info["rim"], info["tex"])
+        self.sigma0 = sigma_of(nz, info, 1.0, rb)
         self.sigma0[self.pick_moved] = np.nan  # the click, kept: its uncertainty is the user's
         x = np.where(self.pick_moved, xy[:, 0], x)
         y = np.where(self.pick_moved, xy[:, 1], y)
@@ -768,9 +767,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
     def _sigma(self, ctx):
         """Per-axis 1-sigma uncertainty (px) of each refined position, from the image
         (:func:`~.sigma.sigma_numpy`; the terms and their gains are described there)."""
-        info = ctx.info
-        return sigma_numpy(self.noise, info["spread"], info["bgres"], info["peak"], ctx.S, self.rb, info["dshape"],
-                           info["rim"], info["tex"])
+        return sigma_of(self.noise, ctx.info, ctx.S, self.rb)
 
     def _rmax(self):
         """Largest disk radius of each marker (a blob may grow to this by foreshortening)."""
