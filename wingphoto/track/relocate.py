@@ -65,7 +65,7 @@ MAX_ANCHORS, MAX_PROBE = 6, 20
 #: first RETRY_SPAN frames, then twice, four and at most MAX_BACKOFF times as far apart
 #: (a search costs ~40 ms; real dots that left the view were searched for 20 times in 60
 #: frames, 5x the tracking time).
-RETRY, RETRY_SPAN, MAX_BACKOFF = 2, 8, 8
+RETRY, RETRY_SPAN, MAX_BACKOFF = 2, 16, 8
 #: Velocity of the markers found: a patch of 2 PATCH_HALF + 1 px around each is found in
 #: the previous frame (correlation at least VEL_SCORE); an affine map of the patches'
 #: motion must hold for VEL_SHARE of them within VEL_RMS px.
