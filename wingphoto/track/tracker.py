@@ -24,7 +24,7 @@ from .refine import (
     _refine_all_kernel,
 )
 from .sigma import sigma_numpy
-from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
+from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
 from .templates import TemplateStage
 
 logger = logging.getLogger("wingphoto.track")
@@ -690,6 +690,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
                 self._vouch(jmp, chk, ctx, res, t)
+            # the rules after the status rules (the stay rule, the vouching) judge identity:
+            # none makes a point ok whose position is imprecise
+            back = (ST == OK) & cond[:, [r[0] for r in RULES].index("imprecise")]
+            ST[back] = FLAGGED
+            RS[back] = _R["imprecise"]
         eidx = ctx.eidx
         if eidx.size:
             ex, ey = X[eidx], Y[eidx]
