@@ -594,7 +594,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         of them there, and is kept for the next frames; without one, every point of the
         frame is flagged ``constellation`` and the motion model coasts over it.
         """
-        saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy())
+        saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
         hyps = [(dt, 0.0, 0.0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0)]
         prev, prev2 = self._prev, self._prev2
         if prev is not None and prev.shape == frame.shape:
@@ -633,13 +633,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         return self._solve(frame, t, aged=best[0])
 
     def _set_model(self, saved, dt, dx, dy, direction):
-        """Restore the motion model from ``saved``, then move its history ``dt`` frames
-        along each marker's motion (:func:`~.predict.shift_history`) and shift its
-        positions by (dx, dy) px."""
-        hx, ht, lf = saved
+        """Restore the motion model and the picks' frame's positions from ``saved``, then
+        move the history ``dt`` frames along each marker's motion
+        (:func:`~.predict.shift_history`) and shift its positions, and ``ref_pos``, by
+        (dx, dy) px: after a camera bump the reference layout is seen in the new pose too
+        (the re-acquisition tells still markers from moving ones by their distance to it)."""
+        hx, ht, lf, ref = saved
         self.hist_x[...] = shift_history(hx, ht, self.nh, dt * direction) if dt else hx
         self.hist_t[...] = ht
         self.lostflag[...] = lf
+        # (a new array: a verify pass's tracker is a shallow copy sharing this one)
+        self.ref_pos = ref + np.array([dx, dy])
         if dx or dy:
             self.hist_x[..., 0] += dx
             self.hist_x[..., 1] += dy
