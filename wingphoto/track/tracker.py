@@ -630,7 +630,24 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         logger.info("frame %d: constellation restored by %s", t,
                     f"{best[0]} frame(s) dropped" if best[0] > 0 else "a repeated frame" if best[0] < 0
                     else f"a camera shift of ({best[1]:.1f}, {best[2]:.1f}) px")
-        return self._solve(frame, t, aged=best[0])
+        ctx = self._solve(frame, t, aged=best[0])
+        if best[0] == 0:
+            # the image's global shift is pulled by the wing's own motion: the markers found
+            # where predicted (the still ones exactly) measure what it missed, and the
+            # motion model and the reference layout take the shift as measured (else the
+            # next frame extrapolates the miss as a velocity)
+            lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (ctx.gap - 1))
+            with np.errstate(invalid="ignore"):
+                good = ctx.fits & (self.nh >= 2) & (ctx.gap <= 2) & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
+            if good.sum() >= 3:
+                cx = float(np.median(ctx.X[good] - ctx.pred[good, 0]))
+                cy = float(np.median(ctx.Y[good] - ctx.pred[good, 1]))
+                lost = self.lostflag.copy()  # (as this frame's plan left it)
+                self._set_model(saved, 0, best[1] + cx, best[2] + cy, direction)
+                self.lostflag[...] = lost
+                logger.debug("frame %d: camera shift measured on %d markers: (%.2f, %.2f) px", t, int(good.sum()),
+                             best[1] + cx, best[2] + cy)
+        return ctx
 
     def _set_model(self, saved, dt, dx, dy, direction):
         """Restore the motion model and the picks' frame's positions from ``saved``, then
