@@ -164,12 +164,20 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
 def _seed_row(res, k, tracker):
     """Row ``k`` of ``res``: the refined picks (score 1; a click the refinement moved by more
     than 1.5 px, or that saw a foreign blob or a rough background, is kept and flagged
-    ``pick_moved``: it was pulled by something - an unpicked neighbour, glare)."""
+    ``pick_moved``: it was pulled by something - an unpicked neighbour, glare). A refined
+    pick whose sigma exceeds ``max_sigma`` keeps its position and is flagged ``imprecise``,
+    as on any other frame: its identity is not in doubt, the click is no precise position
+    either (rounded to the pixel, up to 0.7 px off), and the template and the motion model
+    start from the same centre as before."""
     res.x[k], res.y[k] = tracker.pos[:, 0], tracker.pos[:, 1]
     res.xpix[k], res.ypix[k] = np.rint(tracker.pos[:, 0]), np.rint(tracker.pos[:, 1])
     res.score[k] = 1.0
     res.sigma[k] = tracker.sigma0
     res.status[k] = OK
+    with np.errstate(invalid="ignore"):
+        vague = tracker.sigma0 > tracker.p.max_sigma
+    res.status[k, vague] = FLAGGED
+    res.reason[k, vague] = _R["imprecise"]
     moved = tracker.pick_moved
     res.status[k, moved] = FLAGGED
     res.reason[k, moved] = _R["pick_moved"]

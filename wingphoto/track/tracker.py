@@ -25,7 +25,7 @@ from .refine import (
     _refine_all_kernel,
 )
 from .sigma import sigma_of
-from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, apply_rules, rule_conditions
+from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
 from .templates import TemplateStage
 
 logger = logging.getLogger("wingphoto.track")
@@ -598,7 +598,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         of them there, and is kept for the next frames; without one, every point of the
         frame is flagged ``constellation`` and the motion model coasts over it.
         """
-        saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy())
+        saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
         hyps = [(dt, 0.0, 0.0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0)]
         prev, prev2 = self._prev, self._prev2
         if prev is not None and prev.shape == frame.shape:
@@ -634,16 +634,37 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         logger.info("frame %d: constellation restored by %s", t,
                     f"{best[0]} frame(s) dropped" if best[0] > 0 else "a repeated frame" if best[0] < 0
                     else f"a camera shift of ({best[1]:.1f}, {best[2]:.1f}) px")
-        return self._solve(frame, t, aged=best[0])
+        ctx = self._solve(frame, t, aged=best[0])
+        if best[0] == 0:
+            # the image's global shift is pulled by the wing's own motion: the markers found
+            # where predicted (the still ones exactly) measure what it missed, and the
+            # motion model and the reference layout take the shift as measured (else the
+            # next frame extrapolates the miss as a velocity)
+            lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (ctx.gap - 1))
+            with np.errstate(invalid="ignore"):
+                good = ctx.fits & (self.nh >= 2) & (ctx.gap <= 2) & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
+            if good.sum() >= 3:
+                cx = float(np.median(ctx.X[good] - ctx.pred[good, 0]))
+                cy = float(np.median(ctx.Y[good] - ctx.pred[good, 1]))
+                lost = self.lostflag.copy()  # (as this frame's plan left it)
+                self._set_model(saved, 0, best[1] + cx, best[2] + cy, direction)
+                self.lostflag[...] = lost
+                logger.debug("frame %d: camera shift measured on %d markers: (%.2f, %.2f) px", t, int(good.sum()),
+                             best[1] + cx, best[2] + cy)
+        return ctx
 
     def _set_model(self, saved, dt, dx, dy, direction):
-        """Restore the motion model from ``saved``, then move its history ``dt`` frames
-        along each marker's motion (:func:`~.predict.shift_history`) and shift its
-        positions by (dx, dy) px."""
-        hx, ht, lf = saved
+        """Restore the motion model and the picks' frame's positions from ``saved``, then
+        move the history ``dt`` frames along each marker's motion
+        (:func:`~.predict.shift_history`) and shift its positions, and ``ref_pos``, by
+        (dx, dy) px: after a camera bump the reference layout is seen in the new pose too
+        (the re-acquisition tells still markers from moving ones by their distance to it)."""
+        hx, ht, lf, ref = saved
         self.hist_x[...] = shift_history(hx, ht, self.nh, dt * direction) if dt else hx
         self.hist_t[...] = ht
         self.lostflag[...] = lf
+        # (a new array: a verify pass's tracker is a shallow copy sharing this one)
+        self.ref_pos = ref + np.array([dx, dy])
         if dx or dy:
             self.hist_x[..., 0] += dx
             self.hist_x[..., 1] += dy
@@ -694,6 +715,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
                 self._vouch(jmp, chk, ctx, res, t)
+            # the rules after the status rules (the stay rule, the vouching) judge identity:
+            # none makes a point ok whose position is imprecise
+            back = (ST == OK) & cond[:, [r[0] for r in RULES].index("imprecise")]
+            ST[back] = FLAGGED
+            RS[back] = _R["imprecise"]
         eidx = ctx.eidx
         if eidx.size:
             ex, ey = X[eidx], Y[eidx]
