@@ -10,6 +10,13 @@ from . import engine
 from .match import _analyse_maps, _climb_kernel
 from .status import _R, FLAGGED, OK
 
+#: A step of a marker's path while not ok that differs from the step before by more than
+#: this fraction of its spacing is a hop onto another blob (:meth:`IdentityStage._hopped`).
+HOP_FRACTION = 0.4
+#: A step shorter than this (px) between two longer ones is a one-frame stall (a repeated
+#: frame), not part of a hop (:meth:`IdentityStage._hopped`).
+STALL_PX = 0.5
+
 
 class IdentityStage:
     """Identity checks of :class:`~wingphoto.track.tracker.Tracker`.
@@ -56,10 +63,54 @@ class IdentityStage:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
             far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])]
-            bad = np.concatenate([bad, far]).astype(np.int64)
+            hop = unk[self._hopped(unk, res, t)]
+            bad = np.concatenate([bad, far, hop]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
 
+
+    def _hopped(self, idx, res, t):
+        """Whether each marker of ``idx`` changed blob while it was not ok (boolean).
+
+        Its positions written since its last ok frame, or since its last re-acquisition if
+        later (flagged ones; lost frames are skipped), are followed step by step. A
+        one-frame stall (a step < ``STALL_PX`` after which the path resumes, as on a
+        repeated frame) is dropped; then a step that differs from the step before by more
+        than ``HOP_FRACTION`` of the marker's spacing is a hop onto another blob (a
+        neighbour's, or an unpicked marker's), which the motion model then follows, so
+        that the marker resumes near its prediction on the wrong blob. Only for markers
+        that no neighbour can vouch for."""
+        out = np.zeros(idx.size, bool)
+        T = res.x.shape[0]
+        for k, i in enumerate(idx.tolist()):
+            t0 = int(self.last_ok[i])
+            if not 0 <= t0 < T or abs(t - t0) < 3:
+                continue
+            step = 1 if t > t0 else -1
+            fr = np.arange(t0, t, step)
+            rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
+            if rq.size:  # a re-acquisition moved it on purpose: follow it from there
+                fr = fr[rq[-1]:]
+            P = np.column_stack([res.x[fr, i], res.y[fr, i]])
+            fin = np.isfinite(P).all(axis=1)
+            fr, P = fr[fin], P[fin]
+            if fr.size < 3:
+                continue
+            lim = HOP_FRACTION * self._spacing[i]
+            cons = np.abs(np.diff(fr)) == 1
+            V = np.diff(P, axis=0)
+            keep = np.ones(fr.size, bool)
+            for j in range(2, fr.size - 1):  # a one-frame stall (a repeated frame) comes back
+                if cons[j - 2] and cons[j - 1] and cons[j] and math.hypot(*V[j - 1]) < STALL_PX:
+                    back = P[j + 1] - (P[j - 1] + 2.0 * V[j - 2])  # or resumes one frame late
+                    keep[j] = min(math.hypot(*back), math.hypot(*(V[j] - V[j - 2]))) > lim
+            fr, P = fr[keep], P[keep]
+            cons = np.abs(np.diff(fr)) == 1
+            V = np.diff(P, axis=0)
+            both = cons[1:] & cons[:-1]
+            acc = np.hypot(*(V[1:] - V[:-1]).T)[both]
+            out[k] = acc.size > 0 and acc.max() > lim
+        return out
 
     def _neighbours_then(self, i, ti, Pi, okn, res, alike_only=False):
         """Up to six neighbours of marker ``i``, nearest first: ok now (``okn``) and on frame
