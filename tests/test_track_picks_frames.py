@@ -264,25 +264,31 @@ def test_ctrl_c_in_the_middle_of_a_frame_resumes_identically(seq, several, tmp_p
 
     frames, _ = seq
     picks, ref = several
-    real, calls = tracker_module.update_model, []
-
-    def interrupted(*args, **kw):  # Ctrl-C after the motion model's update, before the rest of the frame
-        out = real(*args, **kw)
-        calls.append(1)
-        if len(calls) == at:
-            os.kill(os.getpid(), signal.SIGINT)
-        return out
-
-    monkeypatch.setattr(tracker_module, "update_model", interrupted)
-    ck = tmp_path / "ck.npz"
-    from wingphoto.track import engine
-    engine.try_fast_frames(False)  # (the compiled fast frame updates the motion model without update_model)
+    # a process started in the background by a non-interactive shell ignores SIGINT (no
+    # KeyboardInterrupt at all): give this test Python's own handler, as in a terminal
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        with pytest.raises(KeyboardInterrupt):
-            track_markers(frames, picks, progress=False, bidirectional=True, checkpoint=ck, checkpoint_every=1000)
+        real, calls = tracker_module.update_model, []
+
+        def interrupted(*args, **kw):  # Ctrl-C after the motion model's update, before the rest of the frame
+            out = real(*args, **kw)
+            calls.append(1)
+            if len(calls) == at:
+                os.kill(os.getpid(), signal.SIGINT)
+            return out
+
+        monkeypatch.setattr(tracker_module, "update_model", interrupted)
+        ck = tmp_path / "ck.npz"
+        from wingphoto.track import engine
+        engine.try_fast_frames(False)  # (the compiled fast frame updates the motion model without update_model)
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                track_markers(frames, picks, progress=False, bidirectional=True, checkpoint=ck, checkpoint_every=1000)
+        finally:
+            engine.try_fast_frames(True)
+        monkeypatch.undo()
+        assert len(calls) >= at and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        pd.testing.assert_frame_equal(
+            track_markers(frames, picks, progress=False, bidirectional=True, checkpoint=ck), ref)
     finally:
-        engine.try_fast_frames(True)
-    monkeypatch.undo()
-    assert len(calls) >= at and signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    pd.testing.assert_frame_equal(
-        track_markers(frames, picks, progress=False, bidirectional=True, checkpoint=ck), ref)
+        signal.signal(signal.SIGINT, previous)
