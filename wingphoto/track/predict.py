@@ -37,14 +37,19 @@ def predict_positions(hx, ht, nh, t):
         return 3.0 * hx[:, 0] - 3.0 * hx[:, 1] + hx[:, 2]
     order = np.where(d > 3, np.minimum(nh, 2), nh)
     order = np.where(d > 8, 1, order)
-    tf = float(t)
-    a0, a1, a2 = t0.astype(float), t1.astype(float), t2.astype(float)
+    return _lagrange(hx, ht.astype(float), order, float(t))
+
+
+def _lagrange(hx, a, order, tq):
+    """Each marker's history polynomial at frame(s) ``tq``: Lagrange weights through its
+    ``order`` (1-3) newest points ``hx`` (N, 3, 2) at frames ``a`` (N, 3, float)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        q0 = (tf - a1) * (tf - a2) / ((a0 - a1) * (a0 - a2))
-        q1 = (tf - a0) * (tf - a2) / ((a1 - a0) * (a1 - a2))
-        q2 = (tf - a0) * (tf - a1) / ((a2 - a0) * (a2 - a1))
-        l0 = (tf - a1) / (a0 - a1)
-        l1 = (tf - a0) / (a1 - a0)
+        q0 = (tq - a1) * (tq - a2) / ((a0 - a1) * (a0 - a2))
+        q1 = (tq - a0) * (tq - a2) / ((a1 - a0) * (a1 - a2))
+        q2 = (tq - a0) * (tq - a1) / ((a2 - a0) * (a2 - a1))
+        l0 = (tq - a1) / (a0 - a1)
+        l1 = (tq - a0) / (a1 - a0)
     c0 = np.where(order == 3, q0, np.where(order == 2, l0, 1.0))
     c1 = np.where(order == 3, q1, np.where(order == 2, l1, 0.0))
     c2 = np.where(order == 3, q2, 0.0)
@@ -86,21 +91,9 @@ def shift_history(hx, ht, nh, dt):
     if dt == 0:
         return out
     a = ht.astype(float)
-    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(invalid="ignore"):  # (NaN history rows of absent points)
         for k in range(3):
-            tq = a[:, k] + dt
-            q0 = (tq - a1) * (tq - a2) / ((a0 - a1) * (a0 - a2))
-            q1 = (tq - a0) * (tq - a2) / ((a1 - a0) * (a1 - a2))
-            q2 = (tq - a0) * (tq - a1) / ((a2 - a0) * (a2 - a1))
-            l0 = (tq - a1) / (a0 - a1)
-            l1 = (tq - a0) / (a1 - a0)
-            c0 = np.where(nh == 3, q0, np.where(nh == 2, l0, 1.0))
-            c1 = np.where(nh == 3, q1, np.where(nh == 2, l1, 0.0))
-            c2 = np.where(nh == 3, q2, 0.0)
-            h1 = np.where(nh[:, None] >= 2, hx[:, 1], 0.0)
-            h2 = np.where(nh[:, None] >= 3, hx[:, 2], 0.0)
-            v = c0[:, None] * hx[:, 0] + c1[:, None] * h1 + c2[:, None] * h2
+            v = _lagrange(hx, a, nh, a[:, k] + dt)
             known = (k < nh)
             out[known, k] = v[known]
     return out

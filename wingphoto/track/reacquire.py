@@ -99,6 +99,21 @@ def _certain(status, reason):
 class ReacquireStage:
     """Re-acquisition of :class:`~wingphoto.track.tracker.Tracker`."""
 
+    def _refine_candidate(self, frame, i, mx, my, X, Y):
+        """Refine marker ``i`` at a candidate pixel (mx, my), the nearest other marker with
+        a position (X, Y) split off when its blob can reach this one's disk; returns
+        :func:`~.refine._refine`'s x, y, mass and diagnostics (arrays of one)."""
+        nb = None
+        oth = np.flatnonzero(np.isfinite(X))
+        oth = oth[oth != i]
+        if oth.size:
+            dj = np.hypot(X[oth] - mx, Y[oth] - my)
+            k = int(np.argmin(dj))
+            if dj[k] < self.rd[i] + 3.0 + self.rb[oth[k]]:
+                nb = np.array([[X[oth[k]], Y[oth[k]]]])
+        sel = np.array([i])
+        return _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2, rmax=self.rd[sel])
+
     def _predict_lost(self, i, okn, X, Y, res, t):
         """Where lost marker ``i`` should be now, from its neighbours.
 
@@ -313,17 +328,7 @@ class ReacquireStage:
             if wrong:
                 logger.debug("frame %d: marker %d: inconsistent with its neighbours", t, i)
                 continue
-            nb = None
-            oth = np.flatnonzero(np.isfinite(X))
-            oth = oth[oth != i]
-            if oth.size:
-                dj = np.hypot(X[oth] - mx, Y[oth] - my)
-                k = int(np.argmin(dj))
-                if dj[k] < self.rd[i] + 3.0 + self.rb[oth[k]]:
-                    nb = np.array([[X[oth[k]], Y[oth[k]]]])
-            sel = np.array([i])
-            rx, ry, mass, inf = _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2,
-                                        rmax=self.rd[sel])
+            rx, ry, mass, inf = self._refine_candidate(frame, i, mx, my, X, Y)
             if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
                 logger.debug("frame %d: marker %d: faint or foreign", t, i)
                 continue

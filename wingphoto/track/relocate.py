@@ -25,7 +25,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import _apply_affine, _robust_affine
-from .refine import _refine
 from .sigma import sigma_of
 from .status import _R, FLAGGED, OK
 
@@ -464,17 +463,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     for i, mx, my, _, _ in found:
         ox[i], oy[i] = mx, my
     for i, mx, my, sc, fxi in found:
-        oth = np.flatnonzero(np.isfinite(ox))
-        oth = oth[oth != i]
-        nb = None
-        if oth.size:
-            dj = np.hypot(ox[oth] - mx, oy[oth] - my)
-            k = int(np.argmin(dj))
-            if dj[k] < tr.rd[i] + 3.0 + tr.rb[oth[k]]:
-                nb = np.array([[ox[oth[k]], oy[oth[k]]]])
         one = np.array([i])
-        rx, ry, mass, inf = _refine(frame, [mx], [my], tr.rd[one], tr.sign[one], tr.noise[one], nb, 2,
-                                    rmax=tr.rd[one])
+        rx, ry, mass, inf = tr._refine_candidate(frame, i, mx, my, ox, oy)
         if not (mass[0] > tr.p.min_mass_ratio * tr.mass0[i]) or inf["foreign"][0]:
             continue
         if not np.hypot(rx[0] - fxi[0], ry[0] - fxi[1]) <= FIT_TOL + 1.0:
