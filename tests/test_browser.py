@@ -228,12 +228,22 @@ class Lab:
                          f"{what} (status containing {expected})", timeout)
 
     def canvas(self, index=0):
-        """The ipympl canvas that receives the mouse (the top one) of the ``index``-th figure."""
-        figures = self.wait(lambda: self.css(".jupyter-matplotlib-canvas-div"), "an ipympl figure")
-        fig = figures[index]
-        self.d.execute_script("arguments[0].scrollIntoView({block: 'center'});", fig)
+        """The ipympl canvas that receives the mouse (the top one) of the ``index``-th figure.
+
+        Waits until that canvas is laid out (a size and a place on the page): right after a
+        redraw, or on a busy machine, ipympl's top canvas can exist with no size yet, and a
+        click on it fails with "has no size and location" (a CI run on 2026-12-01).
+        """
+        def laid_out():
+            fig = self.css(".jupyter-matplotlib-canvas-div")[index]
+            self.d.execute_script("arguments[0].scrollIntoView({block: 'center'});", fig)
+            top = fig.find_elements("css selector", "canvas")[-1]
+            rect = top.rect
+            return top if top.is_displayed() and rect["width"] > 0 and rect["height"] > 0 else None
+
+        canvas = self.wait(laid_out, f"a laid-out ipympl figure {index}")
         time.sleep(0.5)
-        return fig.find_elements("css selector", "canvas")[-1]
+        return canvas
 
     def _offset(self, canvas, x, y, size, axes_box=(0.0, 0.0, 1.0, 1.0)):
         """Offset from the canvas centre of image pixel (x, y) drawn in an axes box (figure fraction)."""
@@ -243,11 +253,22 @@ class Lab:
         v = (1.0 - bottom - ah + ah * (y + 0.5) / size[1]) * h
         return u - w / 2.0, v - h / 2.0
 
-    def click(self, canvas, x, y, size, axes_box=(0.0, 0.0, 1.0, 1.0)):
+    def click(self, canvas, x, y, size, axes_box=(0.0, 0.0, 1.0, 1.0), index=0):
+        """Click image pixel (x, y); if the canvas was replaced or not laid out, find it again (3 tries)."""
+        from selenium.common.exceptions import ElementNotInteractableException, StaleElementReferenceException
         from selenium.webdriver.common.action_chains import ActionChains
 
-        du, dv = self._offset(canvas, x, y, size, axes_box)
-        ActionChains(self.d).move_to_element_with_offset(canvas, round(du), round(dv)).click().perform()
+        for attempt in range(3):
+            try:
+                du, dv = self._offset(canvas, x, y, size, axes_box)
+                ActionChains(self.d).move_to_element_with_offset(canvas, round(du), round(dv)).click().perform()
+                return
+            except (ElementNotInteractableException, StaleElementReferenceException):
+                if attempt == 2:
+                    self.shot("click_failed")
+                    raise
+                time.sleep(1.0)
+                canvas = self.canvas(index)
 
     def drag(self, canvas, x0, y0, x1, y1, size, axes_box=(0.0, 0.0, 1.0, 1.0)):
         from selenium.webdriver.common.action_chains import ActionChains
