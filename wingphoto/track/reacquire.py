@@ -9,6 +9,7 @@ import numpy as np
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
+from .relocate import _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
 
 logger = logging.getLogger(__name__)
@@ -239,9 +240,14 @@ class ReacquireStage:
         est_y = Y.copy()
         nopos = ~np.isfinite(X) & ~self.lostflag
         est_x[nopos], est_y[nopos] = pred[nopos, 0], pred[nopos, 1]
+        # a marker is predicted and checked from neighbours of its kind only: a wing marker
+        # (moving when last seen) from the moving ones, a static dot from the still ones
+        moving = _was_moving(self)
+        still = np.hypot(X - self.ref_pos[:, 0], Y - self.ref_pos[:, 1]) < 1.5
         q = {}
         for i in lost.tolist():
-            r = self._predict_lost(i, okn, X, Y, res, t)
+            kind = ~still if moving[i] else still
+            r = self._predict_lost(i, okn[kind[okn]], X, Y, res, t)
             if r is None:
                 logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
             else:
@@ -319,11 +325,13 @@ class ReacquireStage:
         for i in accept:
             mx, my, sc, _ = found[i]
             nbrs = q[i][3]
-            # the blob must also be where the neighbours put the marker's last ok position
-            # (a long interval: 4 px tolerance, a neighbour's blob is further)
+            # the blob must also be where the neighbours of its kind put the marker's last
+            # ok position (a long interval: 4 px tolerance, a neighbour's blob is further)
             Xi, Yi = X[i], Y[i]
             X[i], Y[i] = mx, my
-            wrong = self._inconsistent(np.array([i]), X, Y, np.where(anchor, OK, ST), res, t, min_lim=4.0).size > 0
+            kind = ~still if moving[i] else still
+            wrong = self._inconsistent(np.array([i]), X, Y, np.where(anchor & kind, OK, FLAGGED), res, t,
+                                       min_lim=4.0).size > 0
             X[i], Y[i] = Xi, Yi
             if wrong:
                 logger.debug("frame %d: marker %d: inconsistent with its neighbours", t, i)
