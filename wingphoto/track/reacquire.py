@@ -240,14 +240,16 @@ class ReacquireStage:
         est_y = Y.copy()
         nopos = ~np.isfinite(X) & ~self.lostflag
         est_x[nopos], est_y[nopos] = pred[nopos, 0], pred[nopos, 1]
-        # a marker is predicted and checked from neighbours of its kind only: a wing marker
-        # (moving when last seen) from the moving ones, a static dot from the still ones
+        # a marker that was moving when last seen (the wing) is predicted and checked from
+        # the neighbours that are not still now: the static mount and dots say nothing of
+        # where a wing marker went (they would keep it at its last position). One that was
+        # still when last seen may be a static dot or a wing marker lost at rest: every
+        # anchor may speak for it (its wing neighbours tell it from a static dot).
         moving = _was_moving(self)
-        still = np.hypot(X - self.ref_pos[:, 0], Y - self.ref_pos[:, 1]) < 1.5
+        away = ~(np.hypot(X - self.ref_pos[:, 0], Y - self.ref_pos[:, 1]) < 1.5)
         q = {}
         for i in lost.tolist():
-            kind = ~still if moving[i] else still
-            r = self._predict_lost(i, okn[kind[okn]], X, Y, res, t)
+            r = self._predict_lost(i, okn[away[okn]] if moving[i] else okn, X, Y, res, t)
             if r is None:
                 logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
             else:
@@ -325,12 +327,13 @@ class ReacquireStage:
         for i in accept:
             mx, my, sc, _ = found[i]
             nbrs = q[i][3]
-            # the blob must also be where the neighbours of its kind put the marker's last
-            # ok position (a long interval: 4 px tolerance, a neighbour's blob is further)
+            # the blob must also be where the neighbours (those moving, for a marker that was
+            # moving) put the marker's last ok position (a long interval: 4 px tolerance, a
+            # neighbour's blob is further)
             Xi, Yi = X[i], Y[i]
             X[i], Y[i] = mx, my
-            kind = ~still if moving[i] else still
-            wrong = self._inconsistent(np.array([i]), X, Y, np.where(anchor & kind, OK, FLAGGED), res, t,
+            judge = anchor & away if moving[i] else anchor
+            wrong = self._inconsistent(np.array([i]), X, Y, np.where(judge, OK, FLAGGED), res, t,
                                        min_lim=4.0).size > 0
             X[i], Y[i] = Xi, Yi
             if wrong:
