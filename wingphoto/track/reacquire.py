@@ -309,7 +309,7 @@ class ReacquireStage:
             for j in blockers.tolist():
                 if j in found:
                     mj = found[j]
-                    apart = math.hypot(mj[0] - mx, mj[1] - my) > self.rb[i] + self.rb[j]
+                    apart = math.hypot(mj[0] - mx, mj[1] - my) > max(self.rb[i], self.rb[j]) + 1.0
                     qi, qj = q[i][0], q[j][0]
                     same = math.hypot(mx - qi[0], my - qi[1]) + math.hypot(mj[0] - qj[0], mj[1] - qj[1])
                     swap = math.hypot(mj[0] - qi[0], mj[1] - qi[1]) + math.hypot(mx - qj[0], my - qj[1])
@@ -323,7 +323,8 @@ class ReacquireStage:
             if okb:
                 accept.append(i)
             else:
-                logger.debug("frame %d: marker %d: blocked by %s", t, i, blockers.tolist())
+                logger.debug("frame %d: marker %d at (%.1f, %.1f), predicted (%.1f, %.1f): blocked by %s", t, i, mx, my,
+                             q[i][0][0], q[i][0][1], blockers.tolist())
         for i in accept:
             mx, my, sc, _ = found[i]
             nbrs = q[i][3]
@@ -339,7 +340,13 @@ class ReacquireStage:
             if wrong:
                 logger.debug("frame %d: marker %d: inconsistent with its neighbours", t, i)
                 continue
-            rx, ry, mass, inf = self._refine_candidate(frame, i, mx, my, X, Y)
+            # the blobs of the other markers found here count as known neighbours (two lost
+            # markers side by side would otherwise see each other's blob as foreign)
+            ox, oy = X.copy(), Y.copy()
+            for j, fj in found.items():
+                if j != i and not np.isfinite(ox[j]):
+                    ox[j], oy[j] = fj[0], fj[1]
+            rx, ry, mass, inf = self._refine_candidate(frame, i, mx, my, ox, oy)
             if not mass[0] > p.min_mass_ratio * self.mass0[i] or inf["foreign"][0]:
                 logger.debug("frame %d: marker %d: faint or foreign", t, i)
                 continue

@@ -423,9 +423,11 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     excl = np.column_stack([X[have], Y[have], tr.rb[have] + 2.0 + float(np.median(tr.rb[group]))])
     cand, _ = find_candidates(frame, tmpl, radius=max(2, int(np.min(tr.rb[group]))), exclude=excl)
     if len(cand) < MIN_INLIERS:
+        logger.debug("frame %d: group of %d lost markers: %d candidate blobs", t, group.size, len(cand))
         return none
     fit = fit_constellation(tr.ref_pos[group], cand)
     if fit is None:
+        logger.debug("frame %d: group of %d lost markers: no fit to %d candidates", t, group.size, len(cand))
         return none
     n_in, second = fit["inliers"], fit["second"]
     if n_in < max(MIN_INLIERS, MIN_SHARE * group.size) or second > MARGIN * n_in:
@@ -457,6 +459,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
             continue
         found.append((i, float(origin[k, 0] + u), float(origin[k, 1] + v), sc, fx[k]))
     if len(found) < max(MIN_INLIERS, MIN_SHARE * group.size):
+        logger.debug("frame %d: group of %d lost markers: %d of %d fitted pass their own template",
+                     t, group.size, len(found), sel.size)
         return none
     out = []
     ox, oy = X.copy(), Y.copy()  # every marker's blob: tracked, or found here
@@ -471,6 +475,8 @@ def relocate_group(tr, frame, t, res, direction, ctx):
             continue
         out.append((i, rx[0], ry[0], sc, mx, my, float(sigma_of(tr.noise[one], inf, sc, tr.rb[one])[0])))
     if len(out) < MIN_INLIERS:
+        logger.debug("frame %d: group of %d lost markers: %d of %d refined near the fit", t, group.size, len(out),
+                     len(found))
         return none
     prev = tr._prev
     cur = np.array([(o[1], o[2]) for o in out])
