@@ -221,7 +221,15 @@ class ReacquireStage:
         (:meth:`_predict_lost`). A blob found near the prediction is accepted only if it
         correlates well and unambiguously, if no other marker (tracked, or lost and
         predicted the same way) is expected nearer to it, if no uncertain marker is near
-        (it could be that marker's blob), and if its refinement finds no foreign blob.
+        (it could be that marker's blob; two lost markers found on distinct peaks do not
+        block each other when their assignment fits their predictions better than the
+        swap), if its refinement finds no foreign blob (the other markers found here are
+        known blobs), and if the neighbours put its last ok position there. A marker
+        that was moving when last seen (:func:`~.relocate._was_moving`) is predicted and
+        checked only from anchors that are not still (within 1.5 px of their reference
+        positions): the static mount and dots, ok beside a wing marker on its last ok
+        frame when its wing neighbours were not, kept the right blob refused to the end
+        of the sequence.
         """
         p = self.p
         # the anchors: ok markers, and those flagged only for their precision
