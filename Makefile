@@ -19,7 +19,7 @@ demo: $(VENV)/.stamp-run
 	$(VENV)/bin/wingphoto demo data-samples --out results
 
 test: $(VENV)/.stamp-test
-	MPLBACKEND=Agg WINGPHOTO_HEADLESS=1 $(PY) -m pytest tests --doctest-modules wingphoto --nbmake notebooks
+	MPLBACKEND=Agg WINGPHOTO_HEADLESS=1 $(PY) -m pytest tests --doctest-modules wingphoto --nbmake notebooks --durations=25
 
 bench: $(VENV)/.stamp-test
 	$(PY) benchmarks/calib_bench.py

@@ -869,7 +869,12 @@ show = plt.show
 def drive(*args, **kwargs):
     fig = plt.gcf()
     tk = fig.canvas.get_tk_widget()
+    waited = [0]
     def act():
+        if not tk.winfo_viewable() and waited[0] < 300:  # a busy machine maps the window late
+            waited[0] += 1
+            tk.after(200, act)
+            return
         for ax, cam in zip(fig.axes, ("left", "right")):
             for r in truth[truth.camera == cam].itertuples():
                 tk.update()  # the window may still be settling its size: measure before each click
