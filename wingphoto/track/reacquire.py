@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
-from .relocate import _was_moving
+from .relocate import _moving, _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
 
 logger = logging.getLogger(__name__)
@@ -254,10 +254,10 @@ class ReacquireStage:
         # still when last seen may be a static dot or a wing marker lost at rest: every
         # anchor may speak for it (its wing neighbours tell it from a static dot).
         moving = _was_moving(self)
-        away = ~(np.hypot(X - self.ref_pos[:, 0], Y - self.ref_pos[:, 1]) < 1.5)
+        anchor_away = _moving(self, X, Y, anchor)  # (anchors have positions)
         q = {}
         for i in lost.tolist():
-            r = self._predict_lost(i, okn[away[okn]] if moving[i] else okn, X, Y, res, t)
+            r = self._predict_lost(i, okn[anchor_away[okn]] if moving[i] else okn, X, Y, res, t)
             if r is None:
                 logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
             else:
@@ -341,7 +341,7 @@ class ReacquireStage:
             # neighbour's blob is further)
             Xi, Yi = X[i], Y[i]
             X[i], Y[i] = mx, my
-            judge = anchor & away if moving[i] else anchor
+            judge = anchor_away if moving[i] else anchor
             wrong = self._inconsistent(np.array([i]), X, Y, np.where(judge, OK, FLAGGED), res, t,
                                        min_lim=4.0).size > 0
             X[i], Y[i] = Xi, Yi

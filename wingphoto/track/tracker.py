@@ -43,6 +43,8 @@ _CONSTELLATION = 0.5
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
+#: Column of the ``imprecise`` rule in :func:`~.status.rule_conditions`' table.
+_IMPRECISE_RULE = [r[0] for r in RULES].index("imprecise")
 #: The refiner's per-marker diagnostics kept in ``FrameContext.info`` (:func:`~.refine._refine`).
 _DIAGNOSTICS = ("foreign", "bgres", "peak", "valley", "spread", "dshape", "rim", "tex")
 
@@ -717,7 +719,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 self._vouch(jmp, chk, ctx, res, t)
             # the rules after the status rules (the stay rule, the vouching) judge identity:
             # none makes a point ok whose position is imprecise
-            back = (ST == OK) & cond[:, [r[0] for r in RULES].index("imprecise")]
+            back = (ST == OK) & cond[:, _IMPRECISE_RULE]
             ST[back] = FLAGGED
             RS[back] = _R["imprecise"]
         eidx = ctx.eidx
