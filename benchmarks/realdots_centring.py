@@ -227,17 +227,11 @@ def measure(img, truth, label):
 
 def stills(cameras):
     """The per-dot errors on the still photographs (DataFrame)."""
-    import tifffile
-
     from wingphoto.synth import realdots
 
-    folder = realdots.default_folder()
     out = []
     for cam in cameras:
-        img_name = {"cam1": "cal1.tif", "cam2": "cal2.tif"}[cam]
-        img = np.asarray(tifffile.imread(folder / img_name))
-        img = img[..., 0] if img.ndim == 3 else img
-        ref = np.loadtxt(folder / f"{cam}_cal_points", ndmin=2)[:, :2]
+        img, ref = realdots._load(None, cam)  # (float32 photograph, reference centroids)
         H, W = img.shape
         ref = ref[np.all((ref > 14) & (ref < np.array([W, H]) - 15), axis=1)]
         out.append(measure(img, ref, f"still_{cam}"))

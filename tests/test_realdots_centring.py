@@ -12,13 +12,7 @@ pytestmark = pytest.mark.skipif(not (realdots.default_folder() / "cal2.tif").is_
 
 
 def _photo(camera):
-    import tifffile
-
-    folder = realdots.default_folder()
-    img = np.asarray(tifffile.imread(folder / {"cam1": "cal1.tif", "cam2": "cal2.tif"}[camera])).astype(np.float32)
-    if img.ndim == 3:
-        img = img[..., 0]
-    ref = np.loadtxt(folder / f"{camera}_cal_points", ndmin=2)[:, :2]
+    img, ref = realdots._load(None, camera)  # (float32 photograph, reference centroids)
     H, W = img.shape
     return img, ref[np.all((ref > 12) & (ref < np.array([W, H]) - 13), axis=1)]
 
