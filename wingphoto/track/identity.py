@@ -16,6 +16,9 @@ HOP_FRACTION = 0.4
 #: A step shorter than this (px) between two longer ones is a one-frame stall (a repeated
 #: frame), not part of a hop (:meth:`IdentityStage._hopped`).
 STALL_PX = 0.5
+#: A flagged marker further than this fraction of its spacing (and than the neighbours'
+#: tolerance) from where its neighbours put it is astray (:meth:`IdentityStage._astray`).
+ASTRAY_FRACTION = 0.4
 
 
 class IdentityStage:
@@ -110,6 +113,35 @@ class IdentityStage:
             both = cons[1:] & cons[:-1]
             acc = np.hypot(*(V[1:] - V[:-1]).T)[both]
             out[k] = acc.size > 0 and acc.max() > lim
+        return out
+
+    def _astray(self, idx, X, Y, ST, res, t):
+        """Flagged markers of ``idx`` that left the place their neighbours put them (boolean).
+
+        The neighbours ok on the marker's last ok frame and now (:meth:`_neighbours_then`)
+        map its last ok position to now (:func:`_neighbour_prediction`); further than the
+        prediction's tolerance and than ``ASTRAY_FRACTION`` of the marker's spacing is
+        astray: the flagged marker follows another blob (a neighbour's, an unpicked
+        marker's, or a smear of the membrane turning edge-on) and, fed to its motion model,
+        would lead its prediction there, so that it resumes on that blob near its
+        prediction, and serve re-acquisition as an anchor. A marker without such
+        neighbours is not judged."""
+        out = np.zeros(idx.size, bool)
+        okn = (ST == OK).nonzero()[0]
+        T = res.x.shape[0]
+        for k, i in enumerate(idx.tolist()):
+            ti = int(self.last_ok[i])
+            if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
+                continue
+            Pi = np.array([res.x[ti, i], res.y[ti, i]])
+            cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            if cand.size < 2:
+                continue
+            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]))
+            if pq is None:
+                continue
+            q, lim = pq
+            out[k] = math.hypot(X[i] - q[0], Y[i] - q[1]) > max(lim, ASTRAY_FRACTION * self._spacing[i])
         return out
 
     def _neighbours_then(self, i, ti, Pi, okn, res, alike_only=False):

@@ -754,6 +754,13 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         soft = ((ST == FLAGGED) & _IS_SOFT[RS] & ~rel).nonzero()[0]
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
+        fl = (rel & (ST == FLAGGED)).nonzero()[0]
+        if fl.size:
+            # a flagged position the neighbours contradict is on another blob: it neither
+            # feeds the motion model nor serves re-acquisition as an anchor ('jump')
+            astray = fl[self._astray(fl, X, Y, ST, res, t)]
+            rel[astray] = False
+            RS[astray] = _R["jump"]
         if ctx.glitch or ctx.aged < 0:
             rel[:] = False  # nothing new: an unexplained frame, or a repeat of the last one
         upd = update_model(t, X, Y, S, ST, rel, ctx.resid, ctx.mass, self.hist_x, self.hist_t, self.nh,
