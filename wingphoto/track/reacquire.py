@@ -214,7 +214,7 @@ class ReacquireStage:
             return np.ones(res.x.shape[1], bool)
         return _certain(res.status[rows], res.reason[rows]).all(0)
 
-    def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred):
+    def _reacquire(self, frame, t, res, direction, X, Y, S, XP, YP, ST, RS, pred, step_velocity=None):
         """Search again for long-lost markers where their reliable neighbours put them.
 
         Each lost marker's position is predicted from its neighbours
@@ -370,6 +370,8 @@ class ReacquireStage:
                 both = nbrs[_certain(res.status[tp, nbrs], res.reason[tp, nbrs])]
                 if both.size:
                     vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
+                    if step_velocity is not None:  # (not the camera's bump, over the frames dropped)
+                        vel = step_velocity(vel)
             self.hist_x[i] = np.nan
             self.hist_x[i, 0] = (rx[0], ry[0])
             self.hist_x[i, 1] = (rx[0] - vel[0], ry[0] - vel[1])

@@ -484,6 +484,9 @@ def relocate_group(tr, frame, t, res, direction, ctx):
     if vel is None:
         logger.debug("frame %d: %d markers of a lost group found, but not their motion: not re-acquired", t, len(out))
         return none
+    # (the image's motion since the previous one holds the camera's bump, and spans the
+    # frames dropped in between)
+    vel = ctx.step_velocity(vel)
     tp = t - direction
     for k, (i, x, y, sc, mx, my, sg) in enumerate(out):
         X[i], Y[i], S[i], ctx.XP[i], ctx.YP[i] = x, y, sc, mx, my

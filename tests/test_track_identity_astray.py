@@ -1,0 +1,128 @@
+"""Identity after a flagged stretch and around glitches: a flagged marker that left its
+neighbours' consensus is astray (:meth:`IdentityStage._astray`); still markers do not
+outvote the moving ones in the constellation check (:meth:`Tracker._broken`); a restart
+velocity leaves out the camera's bump (:meth:`FrameContext.step_velocity`)."""
+from types import SimpleNamespace
+
+import numpy as np
+
+from wingphoto.track.identity import ASTRAY_FRACTION, IdentityStage
+from wingphoto.track.options import TrackOptions
+from wingphoto.track.status import FLAGGED, OK
+from wingphoto.track.tracker import FrameContext, Tracker
+
+SPACING = 20.0
+
+
+def _grid():
+    """A 3 x 3 grid of markers, SPACING px apart (marker 4 in the middle)."""
+    g = np.arange(3) * SPACING
+    return np.array([(100.0 + x, 80.0 + y) for y in g for x in g])
+
+
+def _state(T, t_ok, move, mid_at):
+    """Tracker state and rows ``res`` of a grid that moves by ``move`` px a frame.
+
+    Every marker is ok on every frame but the middle one (4), ok up to frame ``t_ok``
+    and flagged after, at ``mid_at(t)``. Returns the stage and the rows."""
+    P0 = _grid()
+    n = len(P0)
+    x = np.empty((T, n))
+    y = np.empty((T, n))
+    for t in range(T):
+        x[t], y[t] = P0[:, 0] + move[0] * t, P0[:, 1] + move[1] * t
+        if t > t_ok:
+            x[t, 4], y[t, 4] = mid_at(t)
+    status = np.full((T, n), OK, np.int8)
+    status[t_ok + 1:, 4] = FLAGGED
+    res = SimpleNamespace(x=x, y=y, status=status)
+    last_ok = np.full(n, T - 2)
+    last_ok[4] = t_ok
+    hist_t = np.tile(np.array([T - 2, T - 3, T - 4]), (n, 1))
+    hist_x = np.stack([np.column_stack([x[T - 2 - k], y[T - 2 - k]]) for k in range(3)], axis=1)
+    st = SimpleNamespace(last_ok=last_ok, hist_x=hist_x, hist_t=hist_t, nh=np.full(n, 3),
+                         _spacing=np.full(n, SPACING), local=4 * SPACING)
+    st._neighbours_then = IdentityStage._neighbours_then.__get__(st)
+    return st, res
+
+
+def _astray(st, res, t):
+    return IdentityStage._astray(st, np.array([4]), res.x[t], res.y[t], res.status[t].copy(), res, t)
+
+
+def test_flagged_marker_running_off_its_blob_is_astray():
+    # flagged (imprecise, say) from frame 4 on, its motion model followed a smear sliding
+    # 4 px a frame across the wing: 28 px from where its neighbours put it at frame 11
+    move = (1.5, 0.5)
+    T = 12
+
+    def runaway(t):
+        return 100.0 + SPACING + move[0] * t + 4.0 * (t - 4), 80.0 + SPACING + move[1] * t
+
+    st, res = _state(T, 4, move, runaway)
+    assert _astray(st, res, T - 1).tolist() == [True]
+
+
+def test_flagged_marker_on_its_own_blob_is_not_astray():
+    move = (1.5, 0.5)
+    T = 12
+
+    def own(t):  # flagged, but where its neighbours put it, less than the limit off
+        return (100.0 + SPACING + move[0] * t + 0.9 * ASTRAY_FRACTION * SPACING * (t == T - 1),
+                80.0 + SPACING + move[1] * t)
+
+    st, res = _state(T, 4, move, own)
+    assert _astray(st, res, T - 1).tolist() == [False]
+
+
+def test_marker_without_neighbours_ok_then_is_not_judged():
+    move = (1.5, 0.5)
+    T = 12
+    st, res = _state(T, 4, move, lambda t: (400.0, 400.0))
+    res.status[4, [0, 1, 2, 3, 5, 6, 7, 8]] = FLAGGED  # none ok on its last ok frame
+    assert _astray(st, res, T - 1).tolist() == [False]
+
+
+def _constellation(n_still=10, n_moving=6, speed=6.0, nh_moving=3):
+    """Tracker state and frame context of ``n_still`` still markers found where predicted
+    and ``n_moving`` markers moving ``speed`` px a frame found where they were on the
+    previous frame (a frame repeated with new noise)."""
+    n = n_still + n_moving
+    hist_x = np.zeros((n, 3, 2))
+    hist_x[n_still:, :, 0] = np.array([0.0, -speed, -2 * speed])
+    tr = SimpleNamespace(hist_x=hist_x, hist_t=np.tile(np.array([9, 8, 7]), (n, 1)),
+                         nh=np.array([3] * n_still + [nh_moving] * n_moving),
+                         resid_rms=np.full(n, 0.2), p=TrackOptions())
+    tr._consistent = Tracker._consistent.__get__(tr)
+    tr._moving_now = Tracker._moving_now.__get__(tr)
+    resid = np.r_[np.full(n_still, 0.1), np.full(n_moving, speed)]
+    ctx = SimpleNamespace(fits=np.ones(n, bool), gap=np.ones(n, np.int64), resid=resid, S=np.full(n, 0.95))
+    return tr, ctx
+
+
+def test_still_markers_do_not_hide_a_repeated_frame():
+    # 10 still dots where predicted outvote 6 wing markers that all stalled: the frame
+    # must still be checked for a glitch (it was taken for the wing stopping)
+    tr, ctx = _constellation()
+    assert Tracker._broken(tr, ctx)
+
+
+def test_slow_or_just_reacquired_markers_do_not_vote_alone():
+    # a wing marker re-acquired on this or the previous frame (two points, a velocity
+    # borrowed from its neighbours) is no witness of a glitch; nor is a slow one
+    tr, ctx = _constellation(nh_moving=2)
+    assert not Tracker._broken(tr, ctx)
+    tr, ctx = _constellation(speed=0.8)
+    ctx.resid[10:] = 0.8 * 3  # (beyond the 2 px limit, but slower than _MOVING_PX)
+    assert not Tracker._broken(tr, ctx)
+
+
+def test_restart_velocity_leaves_out_the_bump_and_spans_dropped_frames():
+    ctx = SimpleNamespace(shift=np.array([-5.5, -6.0]), aged=0)
+    disp = np.array([[-2.5, 1.0], [-3.5, -1.0]])  # the neighbours' move across the bump
+    v = FrameContext.step_velocity(ctx, disp)
+    np.testing.assert_allclose(v, [[3.0, 7.0], [2.0, 5.0]])
+    ctx = SimpleNamespace(shift=None, aged=2)  # two frames dropped: three frames' motion
+    np.testing.assert_allclose(FrameContext.step_velocity(ctx, np.array([9.0, -3.0])), [3.0, -1.0])
+    ctx = SimpleNamespace(shift=None, aged=-1)  # (a repeat: the image's own motion)
+    np.testing.assert_allclose(FrameContext.step_velocity(ctx, np.array([1.0, 2.0])), [1.0, 2.0])
