@@ -126,3 +126,42 @@ def test_restart_velocity_leaves_out_the_bump_and_spans_dropped_frames():
     np.testing.assert_allclose(FrameContext.step_velocity(ctx, np.array([9.0, -3.0])), [3.0, -1.0])
     ctx = SimpleNamespace(shift=None, aged=-1)  # (a repeat: the image's own motion)
     np.testing.assert_allclose(FrameContext.step_velocity(ctx, np.array([1.0, 2.0])), [1.0, 2.0])
+
+
+def _still_and_moving(T=30, k=18, seed=3):
+    """Ten still discs (a mount, reference dots) and five moving 6 px a frame, frame ``k``
+    repeated with new noise (a recorder's renoised repeat). Returns frames and truth."""
+    from wingphoto.synth import render_discs
+
+    rng = np.random.default_rng(seed)
+    still = np.column_stack([np.linspace(20, 200, 10), np.full(10, 15.0)])
+    moving = np.column_stack([np.full(5, 40.0), np.linspace(70, 150, 5)])
+    t = np.arange(T, dtype=float)
+    t[k + 1:] -= 1  # frame k+1 shows the wing where frame k did
+    truth = np.empty((T, 15, 2))
+    truth[:, :10] = still
+    truth[:, 10:, 0] = moving[:, 0] + 6.0 * t[:, None]
+    truth[:, 10:, 1] = moving[:, 1]
+    d = np.full(15, 8.0)
+    frames = np.stack([render_discs(truth[f], d, (175, 230), noise_std=2.0, rng=rng, dtype=np.uint8)
+                       for f in range(T)])
+    return frames, truth
+
+
+def test_renoised_repeat_is_found_among_still_markers(caplog):
+    # the still discs, where predicted, outvoted the moving ones: the repeat passed as the
+    # wing stopping, and the stall fed to the motion model predicted it going back
+    import logging
+
+    from wingphoto.track import track_markers
+
+    frames, truth = _still_and_moving()
+    with caplog.at_level(logging.INFO, logger="wingphoto.track"):
+        tr = track_markers(frames, np.rint(truth[0]), progress=False)
+    assert "constellation restored by a repeated frame" in caplog.text
+    x = tr["x"].to_numpy().reshape(truth.shape[:2])
+    y = tr["y"].to_numpy().reshape(truth.shape[:2])
+    ok = tr["status"].to_numpy().reshape(truth.shape[:2]) == "ok"
+    err = np.hypot(x - truth[..., 0], y - truth[..., 1])
+    assert (err[ok] <= 1.0).all()
+    assert ok[20:, 10:].mean() > 0.95  # the wing followed on after the repeat
