@@ -781,7 +781,12 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         Reliable points feed the motion model (and edge and imprecise points), and those
         flagged for what may touch their identity (merged, foreign) if they moved like their
         neighbours: a marker next to another or in glare keeps being followed instead of
-        coasting, but not onto a neighbour's or an unpicked marker's blob."""
+        coasting, but not onto a neighbour's or an unpicked marker's blob. No flagged point
+        feeds it (an imprecise one neither) that its neighbours, ok on its last ok frame and
+        now, put elsewhere (:meth:`~.identity.IdentityStage._astray`): it is flagged
+        ``jump`` instead, and serves re-acquisition as no anchor. Such runaway markers,
+        fed, ran 60-70 frames and up to 250 px across the wing (independent renders, extra
+        DEV seeds) and misled re-acquisition onto neighbours' blobs."""
         p = self.p
         X, Y, S, ST, RS = ctx.X, ctx.Y, ctx.S, ctx.ST, ctx.RS
         # an imprecise point passed every identity rule (they override it): only its
