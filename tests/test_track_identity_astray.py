@@ -165,3 +165,33 @@ def test_renoised_repeat_is_found_among_still_markers(caplog):
     err = np.hypot(x - truth[..., 0], y - truth[..., 1])
     assert (err[ok] <= 1.0).all()
     assert ok[20:, 10:].mean() > 0.95  # the wing followed on after the repeat
+
+
+def test_neighbours_near_a_line_do_not_judge_a_marker_far_off_it():
+    # four neighbours on a row (a real-dot sheet's ok ones, say), their positions off by
+    # half a pixel: an affine map from them, extrapolated 90 px off their line, is not
+    # determined (here it puts the marker 84 px from its own blob) and put real dots
+    # followed on their own blobs 30-60 px away; their mean move judges instead
+    T, t, t_ok = 8, 7, 0
+    row = np.column_stack([np.linspace(100, 190, 4), [100.5, 99.6, 100.3, 99.7]])
+    P0 = np.vstack([row, [[150.0, 190.0]]])
+    move = np.array([2.0, 9.0])
+    x = np.empty((T, 5))
+    y = np.empty((T, 5))
+    for f in range(T):
+        x[f], y[f] = (P0 + move * f).T
+    x[t, :4] += [0.3, -0.3, 0.4, -0.3]
+    y[t, :4] += [-0.4, 0.4, 0.3, -0.4]
+    status = np.full((T, 5), OK, np.int8)
+    status[t_ok + 1:, 4] = FLAGGED
+    res = SimpleNamespace(x=x, y=y, status=status)
+    hist_t = np.tile(np.array([t - 1, t - 2, t - 3]), (5, 1))
+    hist_x = np.stack([np.column_stack([x[t - 1 - k], y[t - 1 - k]]) for k in range(3)], axis=1)
+    st = SimpleNamespace(last_ok=np.array([t - 1] * 4 + [t_ok]), hist_x=hist_x, hist_t=hist_t, nh=np.full(5, 3),
+                         _spacing=np.full(5, 30.0), local=120.0)
+    st._neighbours_then = IdentityStage._neighbours_then.__get__(st)
+    out = IdentityStage._astray(st, np.array([4]), x[t], y[t], status[t].copy(), res, t)
+    assert out.tolist() == [False]
+    x[t, 4] += 30.0  # on a neighbour's blob, a spacing off: astray
+    out = IdentityStage._astray(st, np.array([4]), x[t], y[t], status[t].copy(), res, t)
+    assert out.tolist() == [True]

@@ -8,6 +8,7 @@ import numpy as np
 from .geometry import _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
+from .reacquire import _determined
 from .status import _R, FLAGGED, OK
 
 #: A step of a marker's path while not ok that differs from the step before by more than
@@ -19,6 +20,8 @@ STALL_PX = 0.5
 #: A flagged marker further than this fraction of its spacing (and than the neighbours'
 #: tolerance) from where its neighbours put it is astray (:meth:`IdentityStage._astray`).
 ASTRAY_FRACTION = 0.4
+#: Fewest neighbours that judge whether a flagged marker is astray.
+ASTRAY_NEIGHBOURS = 3
 
 
 class IdentityStage:
@@ -118,10 +121,12 @@ class IdentityStage:
     def _astray(self, idx, X, Y, ST, res, t):
         """Flagged markers of ``idx`` that left the place their neighbours put them (boolean).
 
-        The neighbours ok on the marker's last ok frame and now (:meth:`_neighbours_then`)
-        map its last ok position to now (:func:`_neighbour_prediction`); further than the
-        prediction's tolerance and than ``ASTRAY_FRACTION`` of the marker's spacing is
-        astray: the flagged marker follows another blob (a neighbour's, an unpicked
+        The neighbours ok on the marker's last ok frame and now (:meth:`_neighbours_then`,
+        at least ``ASTRAY_NEIGHBOURS``) map its last ok position to now
+        (:func:`_neighbour_prediction`; an affine map only where it determines the marker,
+        :func:`~.reacquire._determined`: four far neighbours near a line put real dots
+        followed on their own blobs 30-60 px away); further than the prediction's
+        tolerance and than ``ASTRAY_FRACTION`` of the marker's spacing is astray: the flagged marker follows another blob (a neighbour's, an unpicked
         marker's, or a smear of the membrane turning edge-on) and, fed to its motion model,
         would lead its prediction there, so that it resumes on that blob near its
         prediction, and serve re-acquisition as an anchor. A marker without such
@@ -135,8 +140,10 @@ class IdentityStage:
                 continue
             Pi = np.array([res.x[ti, i], res.y[ti, i]])
             cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
-            if cand.size < 2:
+            if cand.size < ASTRAY_NEIGHBOURS:
                 continue
+            if cand.size >= 4 and not _determined(Pi, prev):
+                cand, prev = cand[:3], prev[:3]  # (their mean move, if they moved alike)
             pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]))
             if pq is None:
                 continue

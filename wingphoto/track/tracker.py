@@ -504,7 +504,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         RS[~self.lostflag & ~plan["inside"]] = _R["out_of_frame"]
         RS[self.lostflag] = _R["lost_track"]
         return FrameContext(
-            **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged,
+            **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged, shift=np.zeros(2),
             nbr_r=self.rd[np.maximum(plan["j2"][:, 0], 0)] + 0.5,
             XP=np.full(n, np.nan), YP=np.full(n, np.nan), S=np.full(n, np.nan), SEC=np.full(n, -2.0),
             lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
