@@ -18,6 +18,17 @@ Independent terms, added in quadrature:
   the disk cuts; its centre along the streak is then where the disk was put (the pixel
   nearest the match), not the streak's middle - the mechanism behind the 0.5-1 px
   errors at sigma 0.1-0.2 px found on extra DEV seeds of motion_blur;
+* split: the brightness of the gap between the blob and its nearest neighbour
+  (``valley``, the fraction of its contrast on the line joining them; NaN without a
+  neighbour near enough to split against) beyond VALLEY_FLOOR, times its radius: two blobs
+  whose blurred edges run into each other are split at a line that neither blob's edge
+  fixes, and both centres move along the line joining them. It is the mechanism of the
+  dangerous tail found on independent renders (extra DEV seeds 3-8 of ``hard`` and
+  ``clean``): the 31 ok points > 0.5 px off and beyond 3 sigma were all on pairs
+  7-12.3 px apart, every error along the line between them (one blob of a pair towards
+  its neighbour, the other away); ok points with a valley of 0.3-0.6 had a median error of
+  0.2-0.5 px against 0.03 px without one. The merge rule flags only touching pairs or a
+  bright bridge (``valley > 0.8``);
 * and a floor.
 
 How the gains were chosen (never on the TEST seeds): the terms of every candidate point
@@ -61,11 +72,19 @@ SIGMA_RIM, RIM_FLOOR = 2.5, 0.03
 #: blob radius (above ~0.2 the inner disk holds a thin, foreshortened blob's edges, not a
 #: textured face: the match term speaks for those)
 SIGMA_TEX, TEX_FLOOR, TEX_CAP = 0.2, 0.02, 0.2
+#: the split term: SIGMA_VALLEY times the gap's brightness between the blob and its
+#: neighbour (``valley``, see :func:`~.refine._centroid_pass`) beyond VALLEY_FLOOR, times
+#: the blob radius (chosen on the independent renders' extra DEV seeds 3-8 of ``hard`` and
+#: ``clean``, by re-scoring their recorded terms: ok points > 0.5 px off beyond 3 sigma
+#: 31 -> 5, > 0.7 px 14 -> 2, for 0.46 % of the ok points turned imprecise; a floor of 0.2
+#: left 7 and 3, a gain of 0.2 left 6 and 2 but the pairs' median error/sigma ~2)
+SIGMA_VALLEY, VALLEY_FLOOR = 0.3, 0.15
 
 
 @jit
-def point_sigma(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
-    """Compiled sigma (px) of one point; NaN inputs give NaN, as :func:`sigma_numpy`."""
+def point_sigma(noise, spread, bgres, peak, score, rb, dshape, rim, tex, valley):
+    """Compiled sigma (px) of one point; NaN inputs give NaN (but a NaN ``valley``: no
+    split term), as :func:`sigma_numpy`."""
     s_noise = SIGMA_NOISE * noise * spread
     s_bg = SIGMA_BACKGROUND * bgres * peak * spread
     m = 1.0 - score  # (NaN for an edge marker, as np.clip gives)
@@ -75,11 +94,12 @@ def point_sigma(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
     s_shape = SIGMA_SHAPE * max(dshape - SHAPE_FLOOR, 0.0) if not np.isnan(dshape) else np.nan
     s_rim = SIGMA_RIM * max(rim - RIM_FLOOR, 0.0) * rb if not np.isnan(rim) else np.nan
     s_tex = SIGMA_TEX * max(min(tex, TEX_CAP) - TEX_FLOOR, 0.0) * rb if not np.isnan(tex) else np.nan
+    s_split = SIGMA_VALLEY * max(valley - VALLEY_FLOOR, 0.0) * rb if not np.isnan(valley) else 0.0
     return np.sqrt(SIGMA_FLOOR ** 2 + s_noise * s_noise + s_bg * s_bg + s_match * s_match + s_shape * s_shape
-                   + s_rim * s_rim + s_tex * s_tex)
+                   + s_rim * s_rim + s_tex * s_tex + s_split * s_split)
 
 
-def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
+def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex, valley):
     """numpy twin of :func:`point_sigma` (arrays, or scalars broadcast).
 
     Parameters
@@ -102,11 +122,14 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
         Share of the centroid's weight on the disk's rim (a blob the disk cuts).
     tex : ndarray
         Texture of the blob's inner face beyond the pixel noise (relative to its mean).
+    valley : ndarray
+        Brightness of the gap between the blob and its nearest neighbour, as a fraction of
+        its contrast (NaN: no neighbour near enough to split against, no split term).
 
     Returns
     -------
     ndarray
-        sigma (px), NaN where an input is NaN.
+        sigma (px), NaN where an input other than ``valley`` is NaN.
     """
     with np.errstate(invalid="ignore"):
         s_noise = SIGMA_NOISE * noise * spread
@@ -115,8 +138,9 @@ def sigma_numpy(noise, spread, bgres, peak, score, rb, dshape, rim, tex):
         s_shape = SIGMA_SHAPE * np.maximum(dshape - SHAPE_FLOOR, 0.0)
         s_rim = SIGMA_RIM * np.maximum(rim - RIM_FLOOR, 0.0) * rb
         s_tex = SIGMA_TEX * np.maximum(np.minimum(tex, TEX_CAP) - TEX_FLOOR, 0.0) * rb
+        s_split = SIGMA_VALLEY * np.maximum(np.nan_to_num(np.asarray(valley, float)) - VALLEY_FLOOR, 0.0) * rb
         return np.sqrt(SIGMA_FLOOR ** 2 + s_noise ** 2 + s_bg ** 2 + s_match ** 2 + s_shape ** 2 + s_rim ** 2
-                       + s_tex ** 2)
+                       + s_tex ** 2 + s_split ** 2)
 
 
 def sigma_of(noise, info, score, rb):
@@ -124,4 +148,4 @@ def sigma_of(noise, info, score, rb):
     dict :func:`~.refine._refine` returns, or a frame's ``FrameContext.info``), their
     image noise, NCC score (1.0 at a pick) and blob radius."""
     return sigma_numpy(noise, info["spread"], info["bgres"], info["peak"], score, rb, info["dshape"], info["rim"],
-                       info["tex"])
+                       info["tex"], info["valley"])
