@@ -80,7 +80,7 @@ def test_sigma_says_when_the_disk_cuts_a_motion_streak(use_numba):
                                               np.ones(1), np.ones(1), None, 2, rmax=np.array([rd]))
                 errs.append(y[0] - c[1])
                 args = (1.0, inf["spread"][0], inf["bgres"][0], inf["peak"][0], 1.0, rb, inf["dshape"][0],
-                        inf["rim"][0], inf["tex"][0])
+                        inf["rim"][0], inf["tex"][0], inf["valley"][0])
                 s = float(sigma_numpy(*args))
                 assert point_sigma(*args) == pytest.approx(s, rel=1e-9)
                 sig.append(s)

@@ -321,7 +321,8 @@ def _build(key):
         sig = np.empty(n)
         imprecise = np.empty(n, np.bool_)
         for i in range(n):
-            sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i], rim[i], tex[i])
+            sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i], rim[i], tex[i],
+                                 valley[i])
             faded = (peak[i] < fpar[3] * peak0[i]) or (S[i] < fpar[4])
             imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[5])
         lose = np.zeros(n, np.bool_)
