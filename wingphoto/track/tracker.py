@@ -47,6 +47,11 @@ _MOVING_PX = 1.0
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
+#: An ok point this far (fraction of its spacing) from its prediction is checked against its
+#: neighbours' motion even when it was ok on the frame before: the motion model alone does
+#: not vouch for so large a step (a prediction from a re-acquisition's made-up velocity, or
+#: an RMS inflated by one large residual, let a marker onto a neighbour's blob 9-26 px away).
+_VOUCH_STEP = 0.3
 #: Column of the ``imprecise`` rule in :func:`~.status.rule_conditions`' table.
 _IMPRECISE_RULE = [r[0] for r in RULES].index("imprecise")
 #: The refiner's per-marker diagnostics kept in ``FrameContext.info`` (:func:`~.refine._refine`).
@@ -751,7 +756,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             jmp = (RS == _R["jump"]).nonzero()[0]
             # (a marker that stayed on its own blob needs no neighbours to vouch for it: a
             # static dot next to the moving wing)
-            chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3)) & ~stay).nonzero()[0]
+            with np.errstate(invalid="ignore"):
+                big = ctx.resid > _VOUCH_STEP * self._spacing
+            chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3) | big) & ~stay).nonzero()[0]
             if jmp.size or chk.size:
                 self._vouch(jmp, chk, ctx, res, t)
             # the rules after the status rules (the stay rule, the vouching) judge identity:
