@@ -21,7 +21,7 @@ STALL_PX = 0.5
 #: tolerance) from where its neighbours put it is astray (:meth:`IdentityStage._astray`).
 ASTRAY_FRACTION = 0.4
 #: Fewest neighbours that judge whether a flagged marker is astray.
-ASTRAY_NEIGHBOURS = 3
+ASTRAY_NEIGHBOURS = 2
 
 
 class IdentityStage:
@@ -126,17 +126,20 @@ class IdentityStage:
         (:func:`_neighbour_prediction`; an affine map only where it determines the marker,
         :func:`~.reacquire._determined`: four far neighbours near a line put real dots
         followed on their own blobs 30-60 px away); further than the prediction's
-        tolerance and than ``ASTRAY_FRACTION`` of the marker's spacing is astray: the flagged marker follows another blob (a neighbour's, an unpicked
-        marker's, or a smear of the membrane turning edge-on) and, fed to its motion model,
-        would lead its prediction there, so that it resumes on that blob near its
-        prediction, and serve re-acquisition as an anchor. A marker without such
-        neighbours is not judged."""
+        tolerance and than ``ASTRAY_FRACTION`` of the marker's spacing is astray. Only a
+        marker that was ok on that frame is judged (not a pick flagged from the start, as
+        real dots often are: the few far neighbours ok then mispredict it). Astray: the
+        flagged marker follows another blob (a neighbour's, an unpicked marker's, or a
+        smear of the membrane turning edge-on) and, fed to its motion model, would lead
+        its prediction there, so that it resumes on that blob near its prediction, and
+        serve re-acquisition as an anchor. A marker without such neighbours is not
+        judged."""
         out = np.zeros(idx.size, bool)
         okn = (ST == OK).nonzero()[0]
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
             ti = int(self.last_ok[i])
-            if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
+            if not 0 <= ti < T or ti == t or res.status[ti, i] != OK or not np.isfinite(res.x[ti, i]):
                 continue
             Pi = np.array([res.x[ti, i], res.y[ti, i]])
             cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
