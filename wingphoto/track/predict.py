@@ -9,11 +9,6 @@ from .geometry import _nearest_kernel, _nearest_two
 
 __all__ = ["predict_positions", "shift_history", "start_frame", "update_model"]
 
-#: px a marker may drift from its extrapolated prediction per frame coasted (the search
-#: radius, the jump rule's limit ``max(jump_px, 4 rms + 2 (gap - 1))`` and the residual
-#: RMS's update allow for it).
-_COAST_PX = 2.0
-
 
 def predict_positions(hx, ht, nh, t):
     """Extrapolate each marker's reliable history to frame ``t``.
@@ -157,13 +152,7 @@ def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sco
     if ri.size:
         us = ri[nh[ri] >= 2]
         if us.size:
-            # a point after frames coasted is further from its extrapolated prediction by
-            # up to _COAST_PX a frame coasted (the jump rule's allowance): only the rest
-            # measures the model's noise. The whole residual of a marker resumed after a
-            # gap (13 px after 5 frames) inflated its running RMS, hence its search radius
-            # and jump limit, and on the next frame it was ok on a neighbour's blob 26 px
-            # from a correct prediction (independent renderer, black, extra DEV seed 3 right)
-            e = np.maximum(resid[us] - _COAST_PX * (np.abs(t - ht[us, 0]) - 1), 0.0)
+            e = resid[us]
             sigma[us] = np.sqrt(0.8 * sigma[us] ** 2 + 0.2 * e * e)
         hx[ri, 2] = hx[ri, 1]
         hx[ri, 1] = hx[ri, 0]
@@ -265,8 +254,7 @@ def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sc
         ok = ST[i] == 0
         if rel[i]:
             if nh[i] >= 2:
-                # (the part of the residual beyond the coasting allowance: see _history_numpy)
-                e = max(resid[i] - _COAST_PX * (abs(t - ht[i, 0]) - 1), 0.0)
+                e = resid[i]
                 sigma[i] = np.sqrt(0.8 * sigma[i] * sigma[i] + 0.2 * e * e)
             hx[i, 2, 0] = hx[i, 1, 0]
             hx[i, 2, 1] = hx[i, 1, 1]
