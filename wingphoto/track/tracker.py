@@ -11,7 +11,7 @@ from ..motion import estimate_shift, frame_content
 from . import engine
 from .fastpath import fast_step
 from .geometry import _nearest_two
-from .identity import IdentityStage
+from .identity import STALL_PX, IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
 from .predict import shift_history, start_frame, update_model
 from .reacquire import ReacquireStage
@@ -615,8 +615,23 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         n, good = self._consistent(ctx)
         if n >= 3 and good < _CONSTELLATION * n:
             return True
-        n, good = self._consistent(ctx, among=self._moving_now())
-        return n >= 3 and good < _CONSTELLATION * n
+        moving = self._moving_now()
+        n, good = self._consistent(ctx, among=moving)
+        return (n >= 3 and good < _CONSTELLATION * n) or self._stalled(ctx, moving)
+
+    def _stalled(self, ctx, moving):
+        """True when most of the moving markers (at least 3, fed on the frame before) are
+        back where they were on the frame before (within ``STALL_PX``): a frame repeated
+        with new noise. A wing moving >= ``_MOVING_PX`` px a frame does not stop dead at
+        once; at a motion model's limit of a few px, the stall passed as the whole wing
+        stopping, was fed to the model and predicted a marker back onto its neighbour's
+        blob (independent renderer, repeated, extra DEV seed 5 left: ok 13 px off)."""
+        m = (moving & ctx.fits & (ctx.gap == 1)).nonzero()[0]
+        if m.size < 3:
+            return False
+        with np.errstate(invalid="ignore"):
+            still = np.hypot(ctx.X[m] - self.hist_x[m, 0, 0], ctx.Y[m] - self.hist_x[m, 0, 1]) < STALL_PX
+        return bool(still.sum() > _CONSTELLATION * m.size)
 
     def _moving_now(self):
         """Markers whose motion model (three reliable points: not one just re-acquired with
