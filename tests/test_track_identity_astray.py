@@ -95,8 +95,10 @@ def _constellation(n_still=10, n_moving=6, speed=6.0, nh_moving=3):
                          resid_rms=np.full(n, 0.2), p=TrackOptions())
     tr._consistent = Tracker._consistent.__get__(tr)
     tr._moving_now = Tracker._moving_now.__get__(tr)
+    tr._stalled = Tracker._stalled.__get__(tr)
     resid = np.r_[np.full(n_still, 0.1), np.full(n_moving, speed)]
-    ctx = SimpleNamespace(fits=np.ones(n, bool), gap=np.ones(n, np.int64), resid=resid, S=np.full(n, 0.95))
+    ctx = SimpleNamespace(fits=np.ones(n, bool), gap=np.ones(n, np.int64), resid=resid, S=np.full(n, 0.95),
+                          X=hist_x[:, 0, 0] + 0.05, Y=hist_x[:, 0, 1] - 0.05)
     return tr, ctx
 
 
@@ -105,6 +107,18 @@ def test_still_markers_do_not_hide_a_repeated_frame():
     # must still be checked for a glitch (it was taken for the wing stopping)
     tr, ctx = _constellation()
     assert Tracker._broken(tr, ctx)
+
+
+def test_a_stall_within_the_motion_models_limit_is_a_glitch():
+    # a loose motion model (rms 2 px: limit 8 px) accepts the 6 px stall of every moving
+    # marker; that most of them are back where they were still breaks the constellation
+    tr, ctx = _constellation()
+    tr.resid_rms[:] = 2.0
+    assert Tracker._consistent(tr, ctx) == (16, 16)
+    assert Tracker._broken(tr, ctx)
+    ctx.X[10:] += 6.0  # they moved on (where predicted): no glitch
+    ctx.resid[10:] = 0.1
+    assert not Tracker._broken(tr, ctx)
 
 
 def test_slow_or_just_reacquired_markers_do_not_vote_alone():
