@@ -209,3 +209,18 @@ def test_neighbours_near_a_line_do_not_judge_a_marker_far_off_it():
     x[t, 4] += 30.0  # on a neighbour's blob, a spacing off: astray
     out = IdentityStage._astray(st, np.array([4]), x[t], y[t], status[t].copy(), res, t)
     assert out.tolist() == [True]
+
+
+def test_a_large_step_is_vouched_for_even_after_an_ok_frame():
+    # ok on the frame before, three points: the motion model vouches for a small step but
+    # not for one of 0.3 spacing or more (an inflated limit let a marker onto a neighbour's
+    # blob 9-26 px from a correct prediction)
+    n = 4
+    tr = SimpleNamespace(last_ok=np.full(n, 9), nh=np.array([3, 3, 3, 2]), _spacing=np.full(n, 15.0))
+    ctx = SimpleNamespace(ST=np.zeros(n, np.int8), fits=np.ones(n, bool), resid=np.array([0.5, 4.4, 4.6, 0.5]))
+    stay = np.zeros(n, bool)
+    assert Tracker._to_vouch(tr, 10, ctx, stay).tolist() == [2, 3]
+    tr.last_ok[0] = 7  # resuming after a gap
+    assert Tracker._to_vouch(tr, 10, ctx, stay).tolist() == [0, 2, 3]
+    stay[2] = True
+    assert Tracker._to_vouch(tr, 10, ctx, stay).tolist() == [0, 3]

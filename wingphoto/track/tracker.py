@@ -771,9 +771,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             jmp = (RS == _R["jump"]).nonzero()[0]
             # (a marker that stayed on its own blob needs no neighbours to vouch for it: a
             # static dot next to the moving wing)
-            with np.errstate(invalid="ignore"):
-                big = ctx.resid > _VOUCH_STEP * self._spacing
-            chk = ((ST == OK) & fits & ((np.abs(t - self.last_ok) > 1) | (self.nh < 3) | big) & ~stay).nonzero()[0]
+            chk = self._to_vouch(t, ctx, stay)
             if jmp.size or chk.size:
                 self._vouch(jmp, chk, ctx, res, t)
             # the rules after the status rules (the stay rule, the vouching) judge identity:
@@ -795,6 +793,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             g = ST == OK
             ST[g] = FLAGGED
             RS[g] = _R["constellation"]
+
+    def _to_vouch(self, t, ctx, stay):
+        """Ok markers (indices) whose identity the motion model alone does not vouch for:
+        resuming after a gap, restarting (fewer than 3 points), or further than
+        ``_VOUCH_STEP`` of their spacing from their prediction; not those that stayed on
+        their own blob (``stay``). :meth:`~.identity.IdentityStage._vouch` checks them
+        against their neighbours' motion."""
+        with np.errstate(invalid="ignore"):
+            big = ctx.resid > _VOUCH_STEP * self._spacing
+        pending = (np.abs(t - self.last_ok) > 1) | (self.nh < 3) | big
+        return ((ctx.ST == OK) & ctx.fits & pending & ~stay).nonzero()[0]
 
     # ------------------------------------------------------------ update
     def _update(self, frame, t, res, direction, ctx):
