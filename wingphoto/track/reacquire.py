@@ -97,6 +97,26 @@ def _certain(status, reason):
     return (status == OK) | ((status == FLAGGED) & (reason == _R["imprecise"]))
 
 
+def _restart_velocity(nbrs, X, Y, res, tp):
+    """Mean motion (px, (2,)) of neighbours ``nbrs`` from frame ``tp`` to their positions
+    (X, Y) now, or None when none has a position on both frames.
+
+    The neighbours certain on ``tp`` are used if any; else every one with a position there
+    (a neighbour re-acquired on ``tp`` itself: after a group is lost together its members
+    come back a frame apart, and they all share the wing's motion).
+    """
+    nbrs = np.asarray(nbrs, np.int64)
+    if not (0 <= tp < res.x.shape[0]) or not nbrs.size:
+        return None
+    known = nbrs[np.isfinite(X[nbrs]) & np.isfinite(Y[nbrs]) & np.isfinite(res.x[tp, nbrs])
+                 & np.isfinite(res.y[tp, nbrs])]
+    if not known.size:
+        return None
+    sure = known[_certain(res.status[tp, known], res.reason[tp, known])]
+    use = sure if sure.size else known
+    return np.array([np.mean(X[use] - res.x[tp, use]), np.mean(Y[use] - res.y[tp, use])])
+
+
 class ReacquireStage:
     """Re-acquisition of :class:`~wingphoto.track.tracker.Tracker`."""
 
@@ -363,20 +383,20 @@ class ReacquireStage:
             ST[i] = FLAGGED
             RS[i] = _R["reacquired"]
             est_x[i], est_y[i] = rx[0], ry[0]
-            # restart the motion model with the neighbours' velocity
+            # restart the motion model with the neighbours' velocity; none known: no velocity
+            # (one point of history: searched wide next frame) rather than a made-up still one
             tp = t - direction
-            vel = np.zeros(2)
-            if 0 <= tp < res.x.shape[0] and len(nbrs):
-                both = nbrs[_certain(res.status[tp, nbrs], res.reason[tp, nbrs])]
-                if both.size:
-                    vel = np.array([np.mean(X[both] - res.x[tp, both]), np.mean(Y[both] - res.y[tp, both])])
-                    if step_velocity is not None:  # (not the camera's bump, over the frames dropped)
-                        vel = step_velocity(vel)
+            vel = _restart_velocity(nbrs, X, Y, res, tp)
+            if vel is not None and step_velocity is not None:
+                vel = step_velocity(vel)  # (not the camera's bump, over the frames dropped)
             self.hist_x[i] = np.nan
             self.hist_x[i, 0] = (rx[0], ry[0])
-            self.hist_x[i, 1] = (rx[0] - vel[0], ry[0] - vel[1])
             self.hist_t[i] = (t, tp, tp - direction)
-            self.nh[i] = 2
+            if vel is None:
+                self.nh[i] = 1
+            else:
+                self.hist_x[i, 1] = (rx[0] - vel[0], ry[0] - vel[1])
+                self.nh[i] = 2
             self.resid_rms[i] = 1.0
             self.lostflag[i] = False
             self.last_ok[i] = t  # checked against the neighbours: the reference from now on
