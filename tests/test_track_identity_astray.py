@@ -119,6 +119,9 @@ def test_a_stall_within_the_motion_models_limit_is_a_glitch():
     ctx.X[10:] += 6.0  # they moved on (where predicted): no glitch
     ctx.resid[10:] = 0.1
     assert not Tracker._broken(tr, ctx)
+    tr, ctx = _constellation(speed=1.5)  # slow markers may stop within a frame
+    tr.resid_rms[:] = 2.0
+    assert not Tracker._broken(tr, ctx)
 
 
 def test_slow_or_just_reacquired_markers_do_not_vote_alone():

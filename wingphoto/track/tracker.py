@@ -43,6 +43,9 @@ _CONSTELLATION = 0.5
 #: check too (:meth:`Tracker._broken`): a repeated or dropped frame leaves a slower one
 #: within the motion model's limit of 2 px.
 _MOVING_PX = 1.0
+#: A frame on which most markers moving at least this fast (px/frame) are back where they
+#: were is a repeat (:meth:`Tracker._stalled`).
+_STALL_SPEED = 3.0
 #: Dropped-frame hypotheses tried (1 to _MAX_DROPPED frames), and the extra distance (px
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
@@ -617,29 +620,31 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             return True
         moving = self._moving_now()
         n, good = self._consistent(ctx, among=moving)
-        return (n >= 3 and good < _CONSTELLATION * n) or self._stalled(ctx, moving)
+        return (n >= 3 and good < _CONSTELLATION * n) or self._stalled(ctx)
 
-    def _stalled(self, ctx, moving):
-        """True when most of the moving markers (at least 3, fed on the frame before) are
-        back where they were on the frame before (within ``STALL_PX``): a frame repeated
-        with new noise. A wing moving >= ``_MOVING_PX`` px a frame does not stop dead at
-        once; at a motion model's limit of a few px, the stall passed as the whole wing
-        stopping, was fed to the model and predicted a marker back onto its neighbour's
-        blob (independent renderer, repeated, extra DEV seed 5 left: ok 13 px off)."""
-        m = (moving & ctx.fits & (ctx.gap == 1)).nonzero()[0]
+    def _stalled(self, ctx):
+        """True when most of the fast markers (moving >= ``_STALL_SPEED`` px a frame, at
+        least 3, fed on the frame before) are back where they were on the frame before
+        (within ``STALL_PX``): a frame repeated with new noise. A wing moving that fast does
+        not stop dead at once; at a motion model's limit of a few px, the stall passed as
+        the whole wing stopping, was fed to the model and predicted a marker back onto its
+        neighbour's blob (independent renderer, repeated, extra DEV seed 5 left: ok 13 px
+        off). Slower markers do stop within a frame (real dots at 1-1.6 px a frame, at a
+        warp's reversal: taken for a repeat, 5 ok points up to 36 px off)."""
+        m = (self._moving_now(_STALL_SPEED) & ctx.fits & (ctx.gap == 1)).nonzero()[0]
         if m.size < 3:
             return False
         with np.errstate(invalid="ignore"):
             still = np.hypot(ctx.X[m] - self.hist_x[m, 0, 0], ctx.Y[m] - self.hist_x[m, 0, 1]) < STALL_PX
         return bool(still.sum() > _CONSTELLATION * m.size)
 
-    def _moving_now(self):
+    def _moving_now(self, speed=_MOVING_PX):
         """Markers whose motion model (three reliable points: not one just re-acquired with
-        its neighbours' velocity) moves them at least ``_MOVING_PX`` px a frame (boolean)."""
+        its neighbours' velocity) moves them at least ``speed`` px a frame (boolean)."""
         dt = np.abs(self.hist_t[:, 0] - self.hist_t[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):
             v = np.hypot(*(self.hist_x[:, 0] - self.hist_x[:, 1]).T) / dt
-        return (self.nh >= 3) & (v >= _MOVING_PX)
+        return (self.nh >= 3) & (v >= speed)
 
     def _recover(self, frame, t, direction, ctx):
         """Explain a broken constellation by a glitch, or flag the frame.
