@@ -50,7 +50,11 @@ class IdentityStage:
         marker (nothing to compare with) is vouched for by a short jump (< 30 % of the
         spacing) to a strong, unambiguous match. Then a marker resuming after a gap, or
         restarting, must have moved like its neighbours since it was last ok (without
-        neighbours to vouch for it: only close to its own prediction)."""
+        neighbours to vouch for it: only close to its own prediction, and only with three
+        points of its own in the motion model - a prediction from a re-acquisition's
+        borrowed velocity, not corrected since, put markers on neighbours' blobs near it:
+        independent renderer, dropped, extra DEV seeds 8 and 9 right, 7 ok points 12-14 px
+        off)."""
         p = self.p
         X, Y, S, SEC, ST, RS, resid = ctx.X, ctx.Y, ctx.S, ctx.SEC, ctx.ST, ctx.RS, ctx.resid
         if jmp.size:
@@ -68,7 +72,7 @@ class IdentityStage:
         if chk.size:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
-            far = unk[resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])]
+            far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
             hop = unk[self._hopped(unk, res, t)]
             bad = np.concatenate([bad, far, hop]).astype(np.int64)
             ST[bad] = FLAGGED
