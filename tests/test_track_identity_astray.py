@@ -227,3 +227,19 @@ def test_a_large_step_is_vouched_for_even_after_an_ok_frame():
     assert Tracker._to_vouch(tr, 10, ctx, stay).tolist() == [0, 2, 3]
     stay[2] = True
     assert Tracker._to_vouch(tr, 10, ctx, stay).tolist() == [0, 3]
+
+
+def test_own_prediction_vouches_only_with_a_history_of_its_own():
+    # two markers resume 3 frames after their last ok frame with no neighbour to judge
+    # them, both 1 px from their predictions: the one with three points of its own passes,
+    # the one predicted from a re-acquisition's borrowed velocity (two points) does not
+    n, t = 2, 20
+    empty = np.zeros(0, np.int64)
+    tr = SimpleNamespace(p=TrackOptions(), last_ok=np.full(n, t - 3), nh=np.array([3, 2]),
+                         resid_rms=np.full(n, 0.5), _spacing=np.full(n, 15.0),
+                         _inconsistent=lambda *a, **k: (empty, empty),
+                         _hopped=lambda idx, res, t: np.zeros(idx.size, bool))
+    ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
+                          ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
+    IdentityStage._vouch(tr, empty, np.arange(n), ctx, None, t)
+    assert ctx.ST.tolist() == [OK, FLAGGED]
