@@ -105,6 +105,8 @@ def main(argv=None):
     ap.add_argument("--set", choices=("dev", "test"), default="dev")
     ap.add_argument("--kinds", nargs="*", default=list(independent.KINDS))
     ap.add_argument("--seeds", type=int, default=None, help="only the first N seeds of the set")
+    ap.add_argument("--seed-list", type=int, nargs="*", default=None,
+                    help="other DEV seeds instead of the set's (e.g. the extra DEV seeds 3-12; never TEST seeds)")
     ap.add_argument("--frames", type=int, default=100, help="frames per sequence (default 100, one wing beat)")
     ap.add_argument("--cameras", nargs="*", default=list(independent.CAMERAS))
     ap.add_argument("--save", default=None, help="directory for each sequence's tracks and truth")
@@ -116,6 +118,10 @@ def main(argv=None):
         ap.error(f"unknown kinds {bad}; choose from {list(independent.KINDS)}")
     seeds = independent.DEV_SEEDS if args.set == "dev" else independent.TEST_SEEDS
     seeds = seeds[: args.seeds] if args.seeds else seeds
+    if args.seed_list:
+        if args.set != "dev" or set(args.seed_list) & set(independent.TEST_SEEDS):
+            ap.error("--seed-list is for DEV seeds only (TEST seeds are only reported, with --set test)")
+        seeds = tuple(args.seed_list)
     if args.save:
         os.makedirs(args.save, exist_ok=True)
 
