@@ -145,8 +145,10 @@ TEX_INSET = 4.5
 #: everywhere and cascaded through the identity checks (extra DEV seeds 3-12: 4 -> 66
 #: confident errors, two markers re-acquired on neighbours), so it only enters sigma.
 #: The isotropic term (``x^2 + y^2``) is left out: almost constant on the ring, the ring
-#: cannot tell it from the level.
-QUAD_MIN = 12
+#: cannot tell it from the level. Only where the ring departs from its plane by more than
+#: QUAD_BGRES of the contrast (``bgres``; below it no ok point of those sequences was
+#: more than 0.11 px off): a flat background costs nothing.
+QUAD_MIN, QUAD_BGRES = 12, 0.03
 
 
 def _contrast(sig, disk, peak, noise):
@@ -280,7 +282,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         ds = (wflat @ grid.gxy) / wflat.sum(1)[:, None]
         dshape = np.hypot(ds[:, 0] - d[:, 0], ds[:, 1] - d[:, 1])
         # ... and when the background under the disk is curved (QUAD_MIN)
-        okq = rin.sum(1) >= QUAD_MIN
+        okq = (rin.sum(1) >= QUAD_MIN) & (bgres > QUAD_BGRES)
         if okq.any():
             sq = np.where(disk[okq], patch[okq] - _saddle(patch[okq], rin[okq], grid) @ grid.basis5t,
                           np.float32(0.0))
@@ -582,8 +584,16 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     if nout > 0 and nr - nout >= 8:
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-    # the curved background (QUAD_MIN), for dshape
-    doq = nr - nout >= QUAD_MIN
+    sbg = 0.0
+    nbg = 0
+    for k in range(nr):
+        if not routl[k]:
+            res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
+            sbg += res * res
+            nbg += 1
+    bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
+    # the curved background (QUAD_MIN, QUAD_BGRES), for dshape
+    doq = nr - nout >= QUAD_MIN and bg > QUAD_BGRES
     qa = qb = qc = qd = qe = 0.0
     if doq:
         qa, qb, qc, qd, qe = _ring_saddle(ru, rv, rval, routl, nr, qm)
@@ -646,16 +656,8 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 dk = np.sqrt(max(dk2, 1e-12))
                 rwx += w * du[k] / dk
                 rwy += w * dv[k] / dk
-    sbg = 0.0
-    nbg = 0
-    for k in range(nr):
-        if not routl[k]:
-            res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
-            sbg += res * res
-            nbg += 1
     dx = swx / sw if sw > 0 else np.nan
     dy = swy / sw if sw > 0 else np.nan
-    bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
     spread = np.nan
     dshape = np.nan
     rim = (rw - np.hypot(rwx, rwy)) / sw if sw > 0 else np.nan
