@@ -44,7 +44,7 @@ import numpy as np
 from . import engine
 from .match import _analyse_kernel, _climb_kernel, _ncc_kernel, _score_kernel
 from .predict import _history_kernel, _pre_kernel
-from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine_all_kernel
+from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine_all_kernel, split_neighbour_kernel
 from .sigma import point_sigma
 from .status import (
     _IS_SOFT,
@@ -272,7 +272,9 @@ def _build(key):
         rim = np.full(n, np.nan)
         tex = np.full(n, np.nan)
         nb = np.full((n, 2), np.nan)
-        _refine_all_kernel(frame, idx, XP, YP, j2[:, 0], rd, rb, sign, noise, 2, WEIGHT_FRACTION, FOREIGN_FRACTION,
+        jn = np.empty(n, np.int64)
+        split_neighbour_kernel(XP, YP, j2, jn)
+        _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, 2, WEIGHT_FRACTION, FOREIGN_FRACTION,
                            FOREIGN_NOISE, X, Y, mass, foreign, bgres, peak, valley, spread, dshape, rim, tex, nb)
         for i in range(n):
             if foreign[i]:

@@ -23,6 +23,7 @@ from .refine import (
     _contrast,
     _refine,
     _refine_all_kernel,
+    split_neighbour,
 )
 from .sigma import sigma_of
 from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
@@ -891,7 +892,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         kernel (``ctx.X, ctx.Y, ctx.mass, ctx.info``); returns the neighbour positions used
         for the split."""
         XP, YP, X, Y, mass, info = ctx.XP, ctx.YP, ctx.X, ctx.Y, ctx.mass, ctx.info
-        jn = ctx.j2[:, 0]
+        jn = self._split_against(ctx)
         n = len(XP)
         nb = np.full((n, 2), np.nan)
         foreign = np.zeros(n, np.bool_)
@@ -930,9 +931,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             ctx.info[k][idx] = inf[k]
         return x, y, m
 
+    def _split_against(self, ctx):
+        """The neighbour each marker is split against (:func:`~.refine.split_neighbour`);
+        ``ctx.nbr_r`` follows it."""
+        jn = split_neighbour(ctx.XP, ctx.YP, ctx.j2)
+        ctx.nbr_r[:] = self.rd[np.maximum(jn, 0)] + 0.5
+        return jn
+
     def _voronoi(self, ctx):
         """Position of each marker's nearest neighbour for the pixel split (NaN: none near)."""
-        XP, YP, jn = ctx.XP, ctx.YP, ctx.j2[:, 0]
+        XP, YP = ctx.XP, ctx.YP
+        jn = self._split_against(ctx)
         j = np.maximum(jn, 0)
         # only a neighbour matched on this frame: one that lost its match to another
         # marker (conflict) may be anywhere near its prediction, and a split there could
