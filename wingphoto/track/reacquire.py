@@ -23,19 +23,19 @@ _LINE_RMS = 1.5
 _AMPLIFY = 4.0
 
 
-def _determined(p0, src):
+def _determined(p0, src, amplify=_AMPLIFY):
     """True when an affine map fitted on ``src`` (m, 2) determines where ``p0`` (2,) goes.
 
     A map from neighbours on (or near) a line leaves free where the points off that line
-    go: ``p0``'s distance from their line may be at most :data:`_AMPLIFY` times the RMS
-    spread of the neighbours across it (the factor by which their position errors grow
-    in the prediction)."""
+    go: ``p0``'s distance from their line may be at most ``amplify`` (default
+    :data:`_AMPLIFY`) times the RMS spread of the neighbours across it (the factor by
+    which their position errors grow in the prediction)."""
     if len(src) < 3:
         return False
     c = src.mean(0)
     _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
     across = sv[1] / math.sqrt(len(src))
-    return abs(float((p0 - c) @ vt[1])) <= _AMPLIFY * across
+    return abs(float((p0 - c) @ vt[1])) <= amplify * across
 
 
 def _line_prediction(p0, src, dst, max_off):
