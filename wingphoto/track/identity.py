@@ -83,7 +83,9 @@ class IdentityStage:
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
             far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
             hop = unk[self._hopped(unk, res, t)]
-            odd = unk[self._contradicted(unk, X, Y, ST, res, t)]
+            sure = ST.copy()  # (the map is fitted to vouched neighbours only)
+            sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
+            odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
             bad = np.concatenate([bad, far, hop, odd]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
@@ -98,7 +100,9 @@ class IdentityStage:
         of a few frames at stroke reversal the wing turns and stretches, three neighbours
         move 23-30 px in different directions, and nothing is compared. The map fitted to
         those ok on the marker's last ok frame and now (at least ``CONTRADICT_NEIGHBOURS``,
-        :meth:`_neighbours_then`; by least squares, exact for three) still says where it
+        :meth:`_neighbours_then`; by least squares, exact for three; ``ST`` must not call ok
+        the markers still to be vouched for: one resumed 13 px off on a neighbour's blob,
+        as a neighbour, flagged a right marker on independent bumped DEV seed 2 left) still says where it
         went when it determines the marker (:func:`~.reacquire._determined` with
         ``CONTRADICT_AMPLIFY``); further than
         ``ASTRAY_FRACTION`` of its spacing (and than 2.5 px plus twice the map's RMS) is a
