@@ -23,9 +23,10 @@ def _affine(P):
     return (P - C) @ np.array([[c, s], [-s, c]]) + C + [0.0, 25.0]
 
 
-def _vouched(offset, wrong_neighbour=False):
+def _vouched(offset, wrong_neighbour=False, still=()):
     """Status and reason of marker 0 resuming at the neighbours' map + ``offset`` (px);
-    with ``wrong_neighbour``, neighbour 3 resumes too, on another blob."""
+    with ``wrong_neighbour``, neighbour 3 resumes too, on another blob; the neighbours
+    ``still`` are where they were in the reference frame (static dots)."""
     P0 = np.array([[90.0, 90.0], [100.0, 100.0], [112.0, 100.0], [100.0, 112.0]])
     n, T = len(P0), 10
     x = np.full((T, n), np.nan)
@@ -45,6 +46,8 @@ def _vouched(offset, wrong_neighbour=False):
     st = IdentityStage()
     st.p = SimpleNamespace(ambiguity_margin=0.05)
     st.local = 60.0
+    st.ref_pos = P0 - T0 * v  # (frame 0)
+    st.ref_pos[list(still)] = now[list(still)]
     st._spacing = np.full(n, 12.0)
     st.last_ok = np.array([T0, T1, T1, T0 if wrong_neighbour else T1])
     st.nh = np.full(n, 3)
@@ -81,3 +84,9 @@ def test_a_neighbour_still_to_be_vouched_for_is_no_anchor():
     # is where its two vouched neighbours put it; two are too few to judge it
     # (independent bumped DEV seed 2 left: a right marker flagged, 23 point-frames lost)
     assert _vouched(np.array([0.5, 0.5]), wrong_neighbour=True) == (OK, 0)
+
+
+def test_static_neighbours_are_not_its_kind():
+    # a wing marker and two static dots do not move as one body: their map says nothing
+    # (independent black DEV seed 1 right: a right marker flagged for 5 frames)
+    assert _vouched(np.array([8.0, 0.0]), still=(2, 3)) == (OK, 0)

@@ -9,6 +9,7 @@ from .geometry import _apply_affine, _fit_affine, _nearest_two, _neighbour_predi
 from . import engine
 from .match import _analyse_maps, _climb_kernel
 from .reacquire import _determined
+from .relocate import STILL_PX
 from .status import _R, FLAGGED, OK
 
 #: A step of a marker's path while not ok that differs from the step before by more than
@@ -100,7 +101,9 @@ class IdentityStage:
         of a few frames at stroke reversal the wing turns and stretches, three neighbours
         move 23-30 px in different directions, and nothing is compared. The map fitted to
         those ok on the marker's last ok frame and now (at least ``CONTRADICT_NEIGHBOURS``,
-        :meth:`_neighbours_then`; by least squares, exact for three; ``ST`` must not call ok
+        :meth:`_neighbours_then`, and only those away from their reference positions, as a
+        moving marker is: a map of a wing marker and two static dots flagged a right marker
+        on independent black DEV seed 1 right; by least squares, exact for three; ``ST`` must not call ok
         the markers still to be vouched for: one resumed 13 px off on a neighbour's blob,
         as a neighbour, flagged a right marker on independent bumped DEV seed 2 left) still says where it
         went when it determines the marker (:func:`~.reacquire._determined` with
@@ -119,7 +122,11 @@ class IdentityStage:
             if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
                 continue
             Pi = np.array([res.x[ti, i], res.y[ti, i]])
+            if math.hypot(X[i] - self.ref_pos[i, 0], Y[i] - self.ref_pos[i, 1]) < STILL_PX:
+                continue  # (a still marker: its still neighbours agree, or say nothing)
             cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            wing = np.hypot(X[cand] - self.ref_pos[cand, 0], Y[cand] - self.ref_pos[cand, 1]) >= STILL_PX
+            cand, prev = cand[wing], prev[wing]
             if cand.size < CONTRADICT_NEIGHBOURS or not _determined(Pi, prev, CONTRADICT_AMPLIFY):
                 continue
             now = np.column_stack([X[cand], Y[cand]])

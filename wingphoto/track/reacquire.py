@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
-from .relocate import _moving, _was_moving
+from .relocate import STILL_PX, _moving, _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
 
 logger = logging.getLogger(__name__)
@@ -182,10 +182,10 @@ class ReacquireStage:
             use = np.ones(okn.size, bool)
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
-                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
+                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < STILL_PX
                 # (still: slow when last seen and still where it was in the reference frame -
                 # a wing marker lost at stroke reversal is slow too)
-                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < 1.5 else ~still
+                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < STILL_PX else ~still
                 # (a moving marker is not mapped by static dots, nor a static one by the wing)
                 use = group
             cidx = np.flatnonzero(use)
