@@ -238,7 +238,8 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
     tr = SimpleNamespace(p=TrackOptions(), last_ok=np.full(n, t - 3), nh=np.array([3, 2]),
                          resid_rms=np.full(n, 0.5), _spacing=np.full(n, 15.0),
                          _inconsistent=lambda *a, **k: (empty, empty),
-                         _hopped=lambda idx, res, t: np.zeros(idx.size, bool))
+                         _hopped=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
     IdentityStage._vouch(tr, empty, np.arange(n), ctx, None, t)

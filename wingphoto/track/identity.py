@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 
-from .geometry import _nearest_two, _neighbour_prediction
+from .geometry import _apply_affine, _fit_affine, _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
 from .reacquire import _determined
+from .relocate import STILL_PX
 from .status import _R, FLAGGED, OK
 
 #: A step of a marker's path while not ok that differs from the step before by more than
@@ -22,6 +23,14 @@ STALL_PX = 0.5
 ASTRAY_FRACTION = 0.4
 #: Fewest neighbours that judge whether a flagged marker is astray.
 ASTRAY_NEIGHBOURS = 2
+#: Fewest neighbours whose affine map, fitted however unlike their moves, may contradict a
+#: resuming marker that no agreeing group vouches for (:meth:`IdentityStage._contradicted`).
+CONTRADICT_NEIGHBOURS = 3
+#: Largest distance of a resuming marker from its neighbours' line, in units of their
+#: spread across it, for their map to contradict it (:meth:`IdentityStage._contradicted`;
+#: twice re-acquisition's :data:`~.reacquire._AMPLIFY`: the map only flags, with a
+#: tolerance of ``ASTRAY_FRACTION`` of the spacing, not a pixel).
+CONTRADICT_AMPLIFY = 8.0
 
 
 class IdentityStage:
@@ -50,8 +59,9 @@ class IdentityStage:
         marker (nothing to compare with) is vouched for by a short jump (< 30 % of the
         spacing) to a strong, unambiguous match. Then a marker resuming after a gap, or
         restarting, must have moved like its neighbours since it was last ok (without
-        neighbours to vouch for it: only close to its own prediction, and only with three
-        points of its own in the motion model - a prediction from a re-acquisition's
+        neighbours that moved alike to vouch for it: only where the map of three or more
+        unlike ones does not contradict it, :meth:`_contradicted`, close to its own
+        prediction, and only with three points of its own in the motion model - a prediction from a re-acquisition's
         borrowed velocity, not corrected since, put markers on neighbours' blobs near it:
         independent renderer, dropped, extra DEV seeds 8 and 9 right, 7 ok points 12-14 px
         off)."""
@@ -74,10 +84,58 @@ class IdentityStage:
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
             far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
             hop = unk[self._hopped(unk, res, t)]
-            bad = np.concatenate([bad, far, hop]).astype(np.int64)
+            sure = ST.copy()  # (the map is fitted to vouched neighbours only)
+            sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
+            odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
+            bad = np.concatenate([bad, far, hop, odd]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
 
+
+    def _contradicted(self, idx, X, Y, ST, res, t):
+        """Whether each resuming marker of ``idx`` is far from where its neighbours' affine
+        map puts it, though they did not move alike (boolean).
+
+        :meth:`_inconsistent` compares a marker only with neighbours that agree on one
+        motion (an affine map with RMS <= 1.5 px, or a group that moved alike); over a gap
+        of a few frames at stroke reversal the wing turns and stretches, three neighbours
+        move 23-30 px in different directions, and nothing is compared. The map fitted to
+        those ok on the marker's last ok frame and now (at least ``CONTRADICT_NEIGHBOURS``,
+        :meth:`_neighbours_then`, and only those away from their reference positions, as a
+        moving marker is: a map of a wing marker and two static dots flagged a right marker
+        on independent black DEV seed 1 right; by least squares, exact for three; ``ST`` must not call ok
+        the markers still to be vouched for: one resumed 13 px off on a neighbour's blob,
+        as a neighbour, flagged a right marker on independent bumped DEV seed 2 left) still says where it
+        went when it determines the marker (:func:`~.reacquire._determined` with
+        ``CONTRADICT_AMPLIFY``); further than
+        ``ASTRAY_FRACTION`` of its spacing (and than 2.5 px plus twice the map's RMS) is a
+        contradiction. Only flags: a marker that no such map determines is not judged.
+        Independent renderer, standard DEV ``dropped`` seed 2 right: marker 21, lost on the
+        frame the three dropped frames were found on, resumed next frame on a neighbour's
+        blob 1.4 px from its twice-extrapolated prediction, 11 px off; its three
+        neighbours' map put it within 0.6 px of the truth."""
+        out = np.zeros(idx.size, bool)
+        okn = (ST == OK).nonzero()[0]
+        T = res.x.shape[0]
+        for k, i in enumerate(idx.tolist()):
+            ti = int(self.last_ok[i])
+            if not 0 <= ti < T or ti == t or not np.isfinite(res.x[ti, i]):
+                continue
+            Pi = np.array([res.x[ti, i], res.y[ti, i]])
+            if math.hypot(X[i] - self.ref_pos[i, 0], Y[i] - self.ref_pos[i, 1]) < STILL_PX:
+                continue  # (a still marker: its still neighbours agree, or say nothing)
+            cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
+            wing = np.hypot(X[cand] - self.ref_pos[cand, 0], Y[cand] - self.ref_pos[cand, 1]) >= STILL_PX
+            cand, prev = cand[wing], prev[wing]
+            if cand.size < CONTRADICT_NEIGHBOURS or not _determined(Pi, prev, CONTRADICT_AMPLIFY):
+                continue
+            now = np.column_stack([X[cand], Y[cand]])
+            M = _fit_affine(prev, now)
+            rms = float(np.sqrt(np.mean(np.sum((_apply_affine(M, prev) - now) ** 2, axis=1))))
+            q = _apply_affine(M, Pi[None, :])[0]
+            lim = max(2.5 + 2.0 * rms, ASTRAY_FRACTION * self._spacing[i])
+            out[k] = math.hypot(X[i] - q[0], Y[i] - q[1]) > lim
+        return out
 
     def _hopped(self, idx, res, t):
         """Whether each marker of ``idx`` changed blob while it was not ok (boolean).

@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
-from .relocate import _moving, _was_moving
+from .relocate import STILL_PX, _moving, _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
 
 logger = logging.getLogger(__name__)
@@ -23,19 +23,19 @@ _LINE_RMS = 1.5
 _AMPLIFY = 4.0
 
 
-def _determined(p0, src):
+def _determined(p0, src, amplify=_AMPLIFY):
     """True when an affine map fitted on ``src`` (m, 2) determines where ``p0`` (2,) goes.
 
     A map from neighbours on (or near) a line leaves free where the points off that line
-    go: ``p0``'s distance from their line may be at most :data:`_AMPLIFY` times the RMS
-    spread of the neighbours across it (the factor by which their position errors grow
-    in the prediction)."""
+    go: ``p0``'s distance from their line may be at most ``amplify`` (default
+    :data:`_AMPLIFY`) times the RMS spread of the neighbours across it (the factor by
+    which their position errors grow in the prediction)."""
     if len(src) < 3:
         return False
     c = src.mean(0)
     _, sv, vt = np.linalg.svd(src - c, full_matrices=False)
     across = sv[1] / math.sqrt(len(src))
-    return abs(float((p0 - c) @ vt[1])) <= _AMPLIFY * across
+    return abs(float((p0 - c) @ vt[1])) <= amplify * across
 
 
 def _line_prediction(p0, src, dst, max_off):
@@ -182,10 +182,10 @@ class ReacquireStage:
             use = np.ones(okn.size, bool)
             if self.nh[i] >= 2 and self.hist_t[i, 0] != self.hist_t[i, 1]:
                 v = np.hypot(*(self.hist_x[i, 0] - self.hist_x[i, 1])) / abs(self.hist_t[i, 0] - self.hist_t[i, 1])
-                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < 1.5
+                still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < STILL_PX
                 # (still: slow when last seen and still where it was in the reference frame -
                 # a wing marker lost at stroke reversal is slow too)
-                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < 1.5 else ~still
+                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < STILL_PX else ~still
                 # (a moving marker is not mapped by static dots, nor a static one by the wing)
                 use = group
             cidx = np.flatnonzero(use)

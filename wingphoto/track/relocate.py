@@ -69,6 +69,9 @@ RETRY, RETRY_SPAN, MAX_BACKOFF = 2, 16, 8
 #: the previous frame (correlation at least VEL_SCORE); an affine map of the patches'
 #: motion must hold for VEL_SHARE of them within VEL_RMS px.
 PATCH_HALF, VEL_SCORE, VEL_SHARE, VEL_RMS = 15, 0.7, 0.8, 1.5
+#: A marker within this distance (px) of its reference position is still: the static
+#: mount and dots (or a wing at rest), told apart from the moving wing.
+STILL_PX = 1.5
 
 
 def find_candidates(frame, template, *, min_score=CANDIDATE_SCORE, radius=2, exclude=None, max_n=MAX_CANDIDATES):
@@ -344,7 +347,7 @@ def _was_moving(tr):
     faster than 0.3 px a frame - as :mod:`.reacquire` tells the wing from the static dots
     (a static dot hidden by the wing is not fitted with the wing's constellation)."""
     p0 = tr.hist_x[:, 0]
-    away = np.hypot(p0[:, 0] - tr.ref_pos[:, 0], p0[:, 1] - tr.ref_pos[:, 1]) >= 1.5
+    away = np.hypot(p0[:, 0] - tr.ref_pos[:, 0], p0[:, 1] - tr.ref_pos[:, 1]) >= STILL_PX
     dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1]).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         v = np.hypot(*(tr.hist_x[:, 0] - tr.hist_x[:, 1]).T) / dt
@@ -355,7 +358,7 @@ def _was_moving(tr):
 def _moving(tr, X, Y, sel):
     """Markers ``sel`` (bool) that moved from their reference position (the wing, not the
     static dots)."""
-    return sel & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= 1.5)
+    return sel & (np.hypot(X - tr.ref_pos[:, 0], Y - tr.ref_pos[:, 1]) >= STILL_PX)
 
 
 def _due(t, lost_for):
