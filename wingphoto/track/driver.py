@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .audit import audit_against_picks
 from .checkpoint import (
     _WAY_OUT,
     _Checkpointer,
@@ -112,7 +113,9 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         explained by a known marker touches the disk), ``imprecise`` (``sigma`` above
         ``max_sigma``), ``blank`` (a blank frame: black, saturated, constant),
         ``constellation`` (most markers left their predictions at once and no glitch - a
-        dropped or repeated frame, a camera bump - explains it); :func:`check_stereo` adds
+        dropped or repeated frame, a camera bump - explains it), ``misplaced`` (after
+        tracking: away from where its neighbours' affine map from the picks puts it,
+        :mod:`~wingphoto.track.audit`); :func:`check_stereo` adds
         ``stereo``. ``sigma`` (px) is the per-axis 1-sigma uncertainty of x, y, estimated
         from the image (``docs/tracker.md``), NaN where there is no position.
 
@@ -367,6 +370,15 @@ class _Run:
             for name in _Results.names + ("status", "reason"):
                 getattr(out, name)[:, sel] = getattr(res, name)
         _flag_across_groups(out, self.sel)
+        # the last check: ok points against their neighbours' map from the picks, among the
+        # markers picked on one frame (the largest group)
+        audited = np.zeros(N, bool)
+        if self.sel:
+            audited[max(self.sel, key=len)] = True
+        n = audit_against_picks(out, self.xy, audited)
+        if n:
+            logger.info("%d ok point-frames flagged 'misplaced': away from where their neighbours' map from the "
+                        "picks puts them", n)
         return out
 
 

@@ -38,6 +38,7 @@ REASONS = (
     "imprecise",
     "blank",
     "constellation",
+    "misplaced",
 )
 _R = {name: i for i, name in enumerate(REASONS)}
 

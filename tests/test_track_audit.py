@@ -1,0 +1,58 @@
+"""The post-pass audit: ok points against their neighbours' affine map from the picks."""
+import numpy as np
+
+
+def _grid_run(T=30, slip=None, bump_static=False):
+    from wingphoto.track.results import _Results
+    from wingphoto.track.status import OK
+
+    gx, gy = np.meshgrid(np.arange(4) * 12.0, np.arange(4) * 12.0)
+    ref = np.column_stack([gx.ravel(), gy.ravel()]) + 100.0
+    N = len(ref)
+    res = _Results(T, N)
+    for t in range(T):
+        a = 0.02 * t
+        M = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * (1 - 0.01 * t)
+        p = (ref - 118.0) @ M.T + 118.0 + [1.5 * t, 0.7 * t]
+        res.x[t], res.y[t] = p[:, 0], p[:, 1]
+    res.status[:] = OK
+    if slip is not None:
+        i, t0 = slip
+        res.x[t0:, i] += 12.0  # onto the next column's blob, moving on with the wing
+    return res, ref
+
+
+def test_a_slipped_marker_is_flagged_and_the_others_are_not():
+    from wingphoto.track.audit import audit_against_picks
+    from wingphoto.track.status import _R, FLAGGED, OK
+
+    res, ref = _grid_run(slip=(5, 10))
+    n = audit_against_picks(res, ref, np.ones(len(ref), bool))
+    assert n == 20
+    assert (res.status[10:, 5] == FLAGGED).all() and (res.reason[10:, 5] == _R["misplaced"]).all()
+    assert (res.status[:10] == OK).all()
+    others = np.delete(np.arange(len(ref)), 5)
+    assert (res.status[:, others] == OK).all()
+
+
+def test_a_wing_moving_as_one_plane_loses_nothing():
+    from wingphoto.track.audit import audit_against_picks
+
+    res, ref = _grid_run()
+    assert audit_against_picks(res, ref, np.ones(len(ref), bool)) == 0
+
+
+def test_no_verdict_from_too_few_ok_neighbours_or_unaudited_points():
+    from wingphoto.track.audit import audit_against_picks
+    from wingphoto.track.status import FLAGGED, OK
+
+    res, ref = _grid_run(slip=(5, 10))
+    keep = np.array([5, 0, 1, 2])  # three ok neighbours fit any map: nothing checks it
+    res.status[:, np.setdiff1d(np.arange(len(ref)), keep)] = FLAGGED
+    assert audit_against_picks(res, ref, np.ones(len(ref), bool)) == 0
+    res, ref = _grid_run(slip=(5, 10))
+    audited = np.ones(len(ref), bool)
+    audited[5] = False  # picked on another frame: neither judged nor a judge
+    assert audit_against_picks(res, ref, audited) == 0
+    assert (res.status == OK).all()
+

@@ -1,0 +1,143 @@
+"""The last check of a tracking run: every ok point against its neighbours' map from the picks.
+
+A post-pass over the finished result arrays (:meth:`~.driver._Run.merged`). For each
+marker, its ``AUDIT_NEIGHBOURS`` nearest markers in the picks (the reference
+constellation) that are ok on a frame give, by least squares, the affine map from their
+picked positions to where they are on that frame; a planar wing seen by a camera moves, over
+a few neighbour spacings, by such a map however far it turned since the picks. An ok point
+further from where the map puts it than ``AUDIT_FRACTION`` of its spacing is flagged
+``misplaced``.
+
+Why a post-pass: the tracker's identity checks (:mod:`.identity`) judge a marker when it
+moves or resumes, against its neighbours' motion since a recent frame, and each of them
+changes what the motion models and re-acquisition see next; each new check moved identity
+slips from one independent render to another (session 6). A marker that slipped onto
+another blob and then moved steadily with it passed every later frame's checks (a slip
+on an independent render's DEV sequence: ok 33 px off). This check looks at the picks,
+not at recent frames, and only turns ok points into flagged ones after tracking, so it
+cannot send the tracker anywhere: it can cost ok points, never add a wrong one.
+
+A verdict needs a map that can be trusted at the marker: at least ``AUDIT_MIN`` ok
+neighbours (three fit any map exactly: nothing would check it), their residual RMS at most
+``AUDIT_RMS_PX`` (neighbours that do not move as one plane - static dots among wing
+markers, a slipped neighbour - give no verdict), and the marker inside their spread
+(its leverage at most ``AUDIT_LEVERAGE``: no far extrapolation). Written by
+hand: it is a batched weighted least squares over frames (numpy ``einsum`` and
+``linalg.solve``), which no library does for this masked, per-frame case.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .status import _R, FLAGGED, OK
+
+__all__ = ["audit_against_picks"]
+
+#: Neighbours of a marker in the picks that may judge it (ten: near a stroke reversal
+#: most of a marker's six nearest are flagged or lost with it).
+AUDIT_NEIGHBOURS = 10
+#: Fewest of them, ok on the frame, for a verdict.
+AUDIT_MIN = 4
+#: Largest RMS residual (px) of the neighbours' affine map for a verdict.
+AUDIT_RMS_PX = 2.0
+#: Largest leverage of the marker in its neighbours' fit for a verdict (the factor by which
+#: their position errors grow in its prediction, ``sqrt(a0' (A'A)^-1 a0)``; 1/sqrt(n) at
+#: their centre, ~2 for a marker at the wing's edge with its ok neighbours on one side).
+AUDIT_LEVERAGE = 2.5
+#: An ok point further from where its neighbours' map puts it than this fraction of its
+#: spacing (its nearest marker in the picks), and than ``AUDIT_SLACK_PX`` plus three
+#: times the map's error there (its RMS, at least ``AUDIT_RMS_FLOOR``, times the
+#: leverage), is flagged ``misplaced``.
+AUDIT_FRACTION = 0.4
+AUDIT_SLACK_PX = 2.0
+AUDIT_RMS_FLOOR = 0.5
+#: A point whose ok positions all stay within this distance (px) of its pick is still (the
+#: mount, reference dots: a camera bump moves them by a few px): it is neither judged nor a
+#: judge - the wing's map, extrapolated to the hinge, put the mount 8 px from where it sat.
+AUDIT_STILL_PX = 10.0
+
+
+def _neighbours(ref, k):
+    """Indices (N, k) of each point's ``k`` nearest other points in ``ref`` (-1: fewer)."""
+    d = np.hypot(ref[:, None, 0] - ref[None, :, 0], ref[:, None, 1] - ref[None, :, 1])
+    np.fill_diagonal(d, np.inf)
+    order = np.argsort(d, axis=1)[:, :k]
+    near = np.take_along_axis(d, order, axis=1)
+    return np.where(np.isfinite(near), order, -1), near[:, 0]
+
+
+def _map_of_one(p0, src, dst, use):
+    """Per frame: where the least-squares affine map of the neighbours ``src`` (k, 2) ->
+    ``dst`` (T, k, 2), over those ``use`` (T, k), puts ``p0`` (2,); the map's error there
+    (px: its RMS residual, at least ``AUDIT_RMS_FLOOR``, times ``p0``'s leverage); and
+    whether the frame may judge (enough neighbours, a trusted map, a bounded leverage)."""
+    T, k = use.shape
+    A = np.column_stack([src, np.ones(k)])  # (k, 3)
+    w = use.astype(float)
+    n = w.sum(1)
+    G = np.einsum("tj,ja,jb->tab", w, A, A)
+    H = np.einsum("tj,ja,tjd->tad", w, A, np.where(use[..., None], dst, 0.0))
+    out = np.full((T, 2), np.nan)
+    err = np.full(T, np.nan)
+    judge = n >= AUDIT_MIN
+    judge[judge] &= np.linalg.cond(G[judge]) < 1e12  # (neighbours on a line fix no map)
+    t = judge.nonzero()[0]
+    if not t.size:
+        return out, err, judge
+    a0 = np.append(p0, 1.0)
+    beta = np.linalg.solve(G[t], H[t])  # (t, 3, 2)
+    fit = np.einsum("ja,tad->tjd", A, beta)
+    r2 = np.where(use[t], np.sum((fit - dst[t]) ** 2, axis=2), 0.0)
+    rms = np.sqrt(r2.sum(1) / n[t])
+    lev = np.sqrt(np.einsum("a,tab,b->t", a0, np.linalg.inv(G[t]), a0))
+    out[t] = a0 @ beta
+    err[t] = np.maximum(rms, AUDIT_RMS_FLOOR) * lev
+    judge[t] = (rms <= AUDIT_RMS_PX) & (lev <= AUDIT_LEVERAGE)
+    return out, err, judge
+
+
+def audit_against_picks(res, ref, audited):
+    """Flag ``misplaced`` the ok points of ``res`` that their neighbours' map from the picks
+    puts elsewhere (in place).
+
+    Parameters
+    ----------
+    res : _Results
+        The run's merged (T, N) result arrays (``x``, ``y``, ``status``, ``reason``).
+    ref : (N, 2) ndarray of float
+        The picked positions (the reference constellation).
+    audited : (N,) ndarray of bool
+        The points picked on the same frame (the others are neither judged nor judges;
+        nor are the still ones, ``AUDIT_STILL_PX``).
+
+    Returns
+    -------
+    int
+        How many ok point-frames were flagged.
+    """
+    audited = audited & np.all(np.isfinite(ref), axis=1)
+    with np.errstate(invalid="ignore"):
+        moved = np.hypot(res.x - ref[:, 0], res.y - ref[:, 1])
+        moved = np.where(res.status == OK, moved, 0.0).max(axis=0) if len(moved) else np.zeros(len(ref))
+    idx = np.flatnonzero(audited & (moved >= AUDIT_STILL_PX))
+    if idx.size < AUDIT_MIN + 1:
+        return 0
+    nbr, spacing = _neighbours(ref[idx], AUDIT_NEIGHBOURS)
+    ok = res.status[:, idx] == OK
+    X, Y = res.x[:, idx], res.y[:, idx]
+    bad = np.zeros(ok.shape, bool)
+    for a in range(idx.size):
+        js = nbr[a][nbr[a] >= 0]
+        if js.size < AUDIT_MIN or not ok[:, a].any():
+            continue
+        use = ok[:, js] & np.isfinite(X[:, js])
+        dst = np.stack([X[:, js], Y[:, js]], axis=2)
+        pred, err, judge = _map_of_one(ref[idx[a]], ref[idx[js]], dst, use)
+        judge &= ok[:, a]
+        off = np.hypot(X[:, a] - pred[:, 0], Y[:, a] - pred[:, 1])
+        lim = np.maximum(AUDIT_FRACTION * spacing[a], AUDIT_SLACK_PX + 3.0 * err)
+        bad[:, a] = judge & (off > lim)
+    rows, cols = bad.nonzero()
+    res.status[rows, idx[cols]] = FLAGGED
+    res.reason[rows, idx[cols]] = _R["misplaced"]
+    return int(bad.sum())
