@@ -56,3 +56,23 @@ def test_no_verdict_from_too_few_ok_neighbours_or_unaudited_points():
     assert audit_against_picks(res, ref, audited) == 0
     assert (res.status == OK).all()
 
+
+
+def test_engines_agree():
+    from wingphoto.track import audit
+
+    rng = np.random.default_rng(7)
+    T, M = 60, 14
+    ref = rng.uniform(0, 120, (M, 2))
+    nbr, spacing = audit._neighbours(ref, audit.AUDIT_NEIGHBOURS)
+    ang = 0.01 * np.arange(T)[:, None]
+    X = np.cos(ang) * ref[:, 0] - np.sin(ang) * ref[:, 1] + rng.normal(0, 0.8, (T, M))
+    Y = np.sin(ang) * ref[:, 0] + np.cos(ang) * ref[:, 1] + rng.normal(0, 0.8, (T, M))
+    X[rng.random((T, M)) < 0.1] += rng.uniform(-30, 30)  # slips of all sizes
+    ok = rng.random((T, M)) < 0.8
+    X[~ok & (rng.random((T, M)) < 0.5)] = np.nan
+    Y[np.isnan(X)] = np.nan
+    bad = np.empty((T, M), bool)
+    audit._misplaced_kernel(X, Y, ok, ref, nbr, spacing, bad)
+    twin = audit._misplaced_numpy(X, Y, ok, ref, nbr, spacing)
+    assert bad.any() and (bad == twin).all()
