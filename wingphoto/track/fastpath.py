@@ -116,6 +116,35 @@ def _at(idx, h, x, y):
     return hh, xx, yy
 
 
+@engine.jit
+def _touch(frame, px, py, half):
+    """Read one pixel per cache line of each marker's neighbourhood (``half`` px around
+    the rounded prediction ``px, py``, clipped to the frame) and return how many exceed
+    the first: the loads are independent, so the memory system serves them together
+    before the matching and the refinement read those pixels one dependent step at a
+    time (a new frame is not in the cache). Changes nothing but timing."""
+    fh, fw = frame.shape
+    ref = frame[0, 0]
+    step = max(1, 64 // frame.itemsize)
+    count = 0
+    for i in range(px.shape[0]):
+        if not (abs(px[i]) < 1e9 and abs(py[i]) < 1e9):  # (also NaN: not predicted)
+            continue
+        cx = np.int64(np.rint(px[i]))
+        cy = np.int64(np.rint(py[i]))
+        a0 = max(cy - half[i], 0)
+        a1 = min(cy + half[i], fh - 1)
+        b0 = max(cx - half[i], 0)
+        b1 = min(cx + half[i], fw - 1)
+        for a in range(a0, a1 + 1):
+            for b in range(b0, b1 + 1, step):
+                if frame[a, b] > ref:
+                    count += 1
+            if b1 >= b0 and frame[a, b1] > ref:
+                count += 1
+    return count
+
+
 def _build(key):
     """Compile :func:`_fast_frame` for the stage kernels whose sources hash to ``key``."""
 
@@ -181,6 +210,12 @@ def _build(key):
                     rmax = max(rmax, r[i])
         if rmax > 6:
             return 4  # a window that OpenCV matches (Templates._match)
+        # the pixels the matching and the refinement will read, fetched together first
+        # (a new frame is not in the cache; :func:`_touch`)
+        reach = np.empty(n, np.int64)
+        for i in range(n):
+            reach[i] = max(h[i] + r[i], np.int64(np.ceil(rd[i])) + 3) + 1
+        pos[0, 0] = _touch(frame, prx, pry, reach)  # (pos is written again on commit, unused on a bail)
         # ---- matching (Identity._search, numba branch): hill-climb from the prediction
         # where the window is small, correlate the whole window elsewhere
         XP = np.full(n, np.nan)
