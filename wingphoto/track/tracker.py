@@ -676,10 +676,18 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 if math.hypot(sh.dx, sh.dy) > 1.0:
                     hyps.append((0, sh.dx, sh.dy))
         best, best_key = None, (self._consistent(ctx)[1], -np.inf)
+        refined = set()
         for dt, dx, dy in hyps:
             self._set_model(saved, dt, dx, dy, direction)
             c = self._solve(frame, t, aged=dt)
             n, good = self._consistent(c, _DROP_TOL * abs(dt))
+            if dt == 0 and (dx, dy) not in refined:
+                corr = self._shift_miss(c)
+                if corr is not None and all(math.hypot(dx + corr[0] - a, dy + corr[1] - b) > 0.25 for a, b in refined):
+                    # (the image's global shift is pulled by the wing's own motion: the
+                    # markers matched near their shifted predictions measure what it missed)
+                    refined.add((float(dx + corr[0]), float(dy + corr[1])))
+                    hyps.append((0, float(dx + corr[0]), float(dy + corr[1])))
             with np.errstate(invalid="ignore"):
                 r = c.resid[c.fits & (self.nh >= 2)]
             med = float(np.median(r[np.isfinite(r)])) if np.isfinite(r).any() else np.inf
@@ -717,6 +725,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 logger.debug("frame %d: camera shift measured on %d markers: (%.2f, %.2f) px", t, int(good.sum()),
                              best[1] + cx, best[2] + cy)
         return ctx
+
+    def _shift_miss(self, c):
+        """What a camera-shift hypothesis missed (px, (2,)): the per-axis median of the
+        matched markers' offsets from their shifted predictions, or None when fewer than 3
+        markers matched well or the miss is below half a pixel."""
+        with np.errstate(invalid="ignore"):
+            m = c.fits & (self.nh >= 2) & (c.gap <= 2) & (c.S >= self.p.min_score)
+        if m.sum() < 3:
+            return None
+        corr = np.array([np.median(c.X[m] - c.pred[m, 0]), np.median(c.Y[m] - c.pred[m, 1])])
+        return corr if math.hypot(*corr) > 0.5 else None
 
     def _set_model(self, saved, dt, dx, dy, direction):
         """Restore the motion model and the picks' frame's positions from ``saved``, then
