@@ -76,3 +76,48 @@ def test_engines_agree():
     audit._misplaced_kernel(X, Y, ok, ref, nbr, spacing, bad)
     twin = audit._misplaced_numpy(X, Y, ok, ref, nbr, spacing)
     assert bad.any() and (bad == twin).all()
+
+
+def test_only_the_judged_points_are_flagged():
+    from wingphoto.track.audit import audit_against_picks
+    from wingphoto.track.status import OK
+
+    res, ref = _grid_run(slip=(5, 10))
+    judged = np.ones(len(ref), bool)
+    judged[5] = False  # a judge only (audited already, or not re-tracked)
+    assert audit_against_picks(res, ref, np.ones(len(ref), bool), judged) == 0
+    assert (res.status == OK).all()
+
+
+def test_a_marker_picked_on_a_later_frame_is_audited_against_that_frame():
+    # picks in any frame: marker 5 picked on frame 12 (hidden before), slipping on frame 20;
+    # the others, picked on frame 0, judge it from their positions on frame 12
+    from wingphoto.track.driver import _audit_group
+    from wingphoto.track.status import _R, FLAGGED, OK
+
+    res, ref = _grid_run(slip=(5, 20))
+    xy = ref.copy()
+    xy[5] = res.x[12, 5], res.y[12, 5]
+    assert _audit_group(res, xy, 12, np.array([5])) == 10
+    assert (res.status[20:, 5] == FLAGGED).all() and (res.reason[20:, 5] == _R["misplaced"]).all()
+    others = np.delete(np.arange(len(ref)), 5)
+    assert (res.status[:20] == OK).all() and (res.status[:, others] == OK).all()
+
+
+def test_retracked_rows_are_audited_against_the_corrected_frame():
+    import pandas as pd
+
+    from wingphoto.track.driver import _audit_retracked
+
+    res, ref = _grid_run(slip=(5, 20))
+    T, N = res.x.shape
+    f, p = np.meshgrid(np.arange(T), np.arange(N), indexing="ij")
+    out = pd.DataFrame({"camera": "left", "frame": f.ravel(), "point": p.ravel(), "x": res.x.ravel(),
+                        "y": res.y.ravel(), "status": "ok", "reason": ""})
+    out.loc[(out.frame == 10) & (out.point == 5), "status"] = "manual"  # the corrected frame
+    idx = out.index[(out.point == 5) & (out.frame > 10)]  # the re-tracked rows
+    _audit_retracked(out, idx, np.array([5]), 10, T, "left")
+    mine = out[out.point == 5].set_index("frame")
+    assert (mine.loc[20:, "status"] == "flagged").all() and (mine.loc[20:, "reason"] == "misplaced").all()
+    assert (mine.loc[11:19, "status"] == "ok").all() and mine.loc[10, "status"] == "manual"
+    assert (out.loc[out.point != 5, "status"] == "ok").all()

@@ -196,19 +196,23 @@ def _misplaced_kernel(X, Y, ok, ref, nbr, spacing, bad):
             bad[t, a] = np.hypot(X[t, a] - px, Y[t, a] - py) > lim
 
 
-def audit_against_picks(res, ref, audited):
+def audit_against_picks(res, ref, audited, judged=None):
     """Flag ``misplaced`` the ok points of ``res`` that their neighbours' map from the picks
     puts elsewhere (in place).
 
     Parameters
     ----------
-    res : _Results
+    res : _Results or namespace
         The run's merged (T, N) result arrays (``x``, ``y``, ``status``, ``reason``).
     ref : (N, 2) ndarray of float
-        The picked positions (the reference constellation).
+        The reference constellation: the picked positions, or every point's position on
+        one frame where it was ok (a pick frame of other points, a corrected frame).
     audited : (N,) ndarray of bool
-        The points picked on the same frame (the others are neither judged nor judges;
-        nor are the still ones, ``AUDIT_STILL_PX``).
+        The points whose ``ref`` is on that one frame (the others are neither judged nor
+        judges; nor are the still ones, ``AUDIT_STILL_PX``).
+    judged : (N,) ndarray of bool, optional
+        Of those, the points that may be flagged (default: all of them); the others only
+        judge (markers already audited from their own picks, or not re-tracked).
 
     Returns
     -------
@@ -230,6 +234,8 @@ def audit_against_picks(res, ref, audited):
         _misplaced_kernel(X, Y, ok, np.ascontiguousarray(ref[idx]), nbr, spacing, bad)
     else:
         bad = _misplaced_numpy(X, Y, ok, ref[idx], nbr, spacing)
+    if judged is not None:
+        bad &= np.asarray(judged, bool)[idx][None, :]
     rows, cols = bad.nonzero()
     res.status[rows, idx[cols]] = FLAGGED
     res.reason[rows, idx[cols]] = _R["misplaced"]

@@ -4,8 +4,10 @@ from __future__ import annotations
 import dataclasses
 import logging
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 
 from .audit import audit_against_picks
 from .checkpoint import (
@@ -371,15 +373,65 @@ class _Run:
                 getattr(out, name)[:, sel] = getattr(res, name)
         _flag_across_groups(out, self.sel)
         # the last check: ok points against their neighbours' map from the picks, among the
-        # markers picked on one frame (the largest group)
-        audited = np.zeros(N, bool)
+        # markers picked on one frame (the largest group); then each other group against
+        # the constellation on its own pick frame (every marker ok there judges it)
+        n = 0
         if self.sel:
-            audited[max(self.sel, key=len)] = True
-        n = audit_against_picks(out, self.xy, audited)
+            main = max(range(len(self.sel)), key=lambda g: len(self.sel[g]))
+            audited = np.zeros(N, bool)
+            audited[self.sel[main]] = True
+            n = audit_against_picks(out, self.xy, audited)
+            for g, (k, sel) in enumerate(zip(self.ks, self.sel)):
+                if g != main:
+                    n += _audit_group(out, self.xy, k, sel)
         if n:
             logger.info("%d ok point-frames flagged 'misplaced': away from where their neighbours' map from the "
                         "picks puts them", n)
         return out
+
+
+def _audit_group(res, xy, k, sel):
+    """Audit (:func:`~.audit.audit_against_picks`) the markers ``sel`` picked on frame ``k``
+    against the constellation on that frame: their picks and the positions of the markers
+    ok there; returns how many of their ok point-frames were flagged."""
+    ref = np.full((res.x.shape[1], 2), np.nan)
+    ok = res.status[k] == OK
+    ref[ok, 0], ref[ok, 1] = res.x[k, ok], res.y[k, ok]
+    ref[sel] = xy[sel]
+    judged = np.zeros(len(ref), bool)
+    judged[sel] = True
+    return audit_against_picks(res, ref, np.all(np.isfinite(ref), axis=1), judged)
+
+
+def _audit_retracked(out, idx, pts, frame, T, camera):
+    """Audit (:func:`~.audit.audit_against_picks`) the re-tracked rows ``idx`` of ``out``
+    (points ``pts``, after ``frame``) against the constellation on ``frame``: the positions
+    of every point ok or manual there; a misplaced ok row is flagged in place."""
+    rows = out if camera is None or "camera" not in out.columns else out[out["camera"] == camera]
+    rows = rows[(rows["frame"] >= 0) & (rows["frame"] < T)]
+    ids = np.unique(rows["point"].to_numpy(np.int64))
+    col = np.searchsorted(ids, rows["point"].to_numpy(np.int64))
+    f = rows["frame"].to_numpy(np.int64)
+    res = SimpleNamespace(x=np.full((T, ids.size), np.nan), y=np.full((T, ids.size), np.nan),
+                          status=np.full((T, ids.size), LOST, np.int8), reason=np.zeros((T, ids.size), np.int8))
+    res.x[f, col], res.y[f, col] = rows["x"].to_numpy(float), rows["y"].to_numpy(float)
+    st = rows["status"].to_numpy()
+    res.status[f, col] = np.where(st == "ok", OK, FLAGGED)
+    on = f == frame
+    ref = np.full((ids.size, 2), np.nan)
+    keep = on & np.isin(st, ("ok", "manual"))
+    ref[col[keep], 0], ref[col[keep], 1] = res.x[frame, col[keep]], res.y[frame, col[keep]]
+    judged = np.isin(ids, pts)
+    before = res.status.copy()
+    if not audit_against_picks(res, ref, np.all(np.isfinite(ref), axis=1), judged):
+        return
+    tf, tc = np.nonzero((before == OK) & (res.status != OK))
+    hit = pd.MultiIndex.from_arrays([tf, ids[tc]])
+    sub = out.loc[idx]
+    m = pd.MultiIndex.from_arrays([sub["frame"].to_numpy(np.int64), sub["point"].to_numpy(np.int64)]).isin(hit)
+    m &= (sub["frame"] > frame).to_numpy()
+    out.loc[sub.index[m], "status"] = "flagged"
+    out.loc[sub.index[m], "reason"] = "misplaced"
 
 
 def _flag_across_groups(res, groups, tol=GROUP_CONFLICT_PX):
@@ -538,6 +590,7 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
     for c in ("x", "y", "score", "status", "x_pix", "y_pix", "reason", "sigma"):
         if c in out.columns:
             out.loc[sub["index"].to_numpy(), c] = sub[c].to_numpy()
+    _audit_retracked(out, idx, pts, frame, fr.n, camera)
     # a re-tracked point must not sit on another point
     others = out[~out["point"].isin(pts) & out["status"].isin(("ok", "manual")) & (out["frame"] > frame)
                  & (out["frame"] <= stop)]
