@@ -663,7 +663,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         dropped (each marker's history moved that many frames along its own quadratic,
         :func:`~.predict.shift_history`), a frame repeated with new noise (one back), and
         a camera bump - the global shift between the previous and this frame
-        (:func:`wingphoto.motion.estimate_shift`) added to the history. A dropped-frames
+        (:func:`wingphoto.motion.estimate_shift`) added to the history, confirmed by the
+        still markers (:meth:`_bump_holds`) and solved once more with its miss measured on
+        them (:meth:`_shift_miss`). A dropped-frames
         hypothesis extrapolates further, so its markers may be ``_DROP_TOL`` px per frame
         dropped further from their predictions. The hypothesis that puts the most
         markers where predicted (ties: the smaller median residual) wins if it puts most
@@ -699,7 +701,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 corr = self._shift_miss(c, saved[0])
                 if corr is not None and all(math.hypot(dx + corr[0] - a, dy + corr[1] - b) > 0.25 for a, b in refined):
                     # (the image's global shift is pulled by the wing's own motion: the
-                    # markers matched near their shifted predictions measure what it missed)
+                    # still markers found near their shifted predictions measure its miss)
                     refined.add((float(dx + corr[0]), float(dy + corr[1])))
                     hyps.append((0, float(dx + corr[0]), float(dy + corr[1])))
             med = _median_residual(c, self.nh)
@@ -758,7 +760,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         been taken for a shift of (-1.4, -0.9) px, which moved the reference layout under
         the still dots and let their affine map re-acquire a wing marker on its
         neighbour's blob (independent renderer, dropped extra DEV seed 15 right: ok 44 px
-        off, frames 90-99, with the refinement of :meth:`_shift_miss`)."""
+        off, frames 90-99, with a first version of :meth:`_shift_miss` that measured the
+        miss on all markers)."""
         m = self._still_found(c, hx)
         if m.size < 2:
             return True
