@@ -51,6 +51,7 @@ from .status import (
     _R,
     _RULE_REASON,
     _RULE_STATUS,
+    COAST_PX,
     FLAGGED,
     LOST,
     OK,
@@ -349,7 +350,7 @@ def _build(key):
         for i in range(n):
             if fits[i] and nh[i] >= 2 and gap[i] <= 2:
                 nchk += 1
-                lim = max(2.0, 4.0 * rrms[i] + 2.0 * (gap[i] - 1))
+                lim = max(2.0, 4.0 * rrms[i] + COAST_PX * (gap[i] - 1))
                 if resid[i] <= lim and S[i] >= fpar[1]:
                     ngood += 1
         if nchk >= 3 and ngood < fpar[6] * nchk:

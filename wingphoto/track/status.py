@@ -42,6 +42,11 @@ REASONS = (
 )
 _R = {name: i for i, name in enumerate(REASONS)}
 
+#: How much further (px) from its prediction a marker may be found for each frame it went
+#: unseen (``gap - 1``): the motion model's error grows while it coasts (the jump rule, the
+#: constellation check of :class:`~.tracker.Tracker` and of the fast frame).
+COAST_PX = 2.0
+
 #: The status rules, in order (the last that applies wins): (reason, status, condition).
 RULES = (
     ("imprecise", FLAGGED, "sigma > max_sigma (a precision flag: any identity rule below overrides it)"),
@@ -85,7 +90,7 @@ def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, si
         cond[i, 3] = np.isfinite(par[3]) and ms > par[3] * mass_ref[i]
         cond[i, 4] = np.isfinite(par[4]) and sc < score_ref[i] - par[4]
         cond[i, 5] = SEC[i] >= sc - par[5]
-        lim = max(par[6], 4.0 * sigma[i] + 2.0 * (gap[i] - 1))
+        lim = max(par[6], 4.0 * sigma[i] + COAST_PX * (gap[i] - 1))
         cond[i, 6] = nh[i] >= 3 and resid[i] > lim
         cond[i, 7] = foreign[i]
         # blobs touching a neighbour's (matched, or predicted if tracked last frame)
@@ -110,7 +115,7 @@ def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sig
                       XP, YP, prx, pry, inside, j2, rb, valley, lose, par, cond):
     """numpy twin of :func:`_conditions_kernel` (same arguments, same output)."""
     with np.errstate(invalid="ignore"):
-        lim = np.maximum(par[6], 4.0 * sigma + 2.0 * (gap - 1))
+        lim = np.maximum(par[6], 4.0 * sigma + COAST_PX * (gap - 1))
         px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
         py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
         j = np.maximum(j2, 0)

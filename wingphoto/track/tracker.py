@@ -26,7 +26,7 @@ from .refine import (
     split_neighbour,
 )
 from .sigma import sigma_of
-from .status import _IS_SOFT, _R, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
+from .status import _IS_SOFT, _R, COAST_PX, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
 from .templates import TemplateStage
 
 logger = logging.getLogger("wingphoto.track")
@@ -603,14 +603,14 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
 
         Checkable: matched markers with a velocity (two or more reliable points, at most
         one frame coasted), of ``among`` (boolean) if given; found where predicted:
-        residual within the motion model's limit (``max(2 px, 4 rms + 2 (gap - 1))``,
+        residual within the motion model's limit (``max(2 px, 4 rms + COAST_PX (gap - 1))``,
         plus ``extra`` px) and a score of at least ``min_score``.
         """
         gap = ctx.gap
         chk = ctx.fits & (self.nh >= 2) & (gap <= 2)
         if among is not None:
             chk &= among
-        lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (gap - 1)) + extra
+        lim = np.maximum(2.0, 4.0 * self.resid_rms + COAST_PX * (gap - 1)) + extra
         with np.errstate(invalid="ignore"):
             good = chk & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
         return int(chk.sum()), int(good.sum())
@@ -726,7 +726,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             # where predicted (the still ones exactly) measure what it missed, and the
             # motion model and the reference layout take the shift as measured (else the
             # next frame extrapolates the miss as a velocity)
-            lim = np.maximum(2.0, 4.0 * self.resid_rms + 2.0 * (ctx.gap - 1))
+            lim = np.maximum(2.0, 4.0 * self.resid_rms + COAST_PX * (ctx.gap - 1))
             with np.errstate(invalid="ignore"):
                 good = ctx.fits & (self.nh >= 2) & (ctx.gap <= 2) & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
             if good.sum() >= 3:
