@@ -239,8 +239,25 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
                          resid_rms=np.full(n, 0.5), _spacing=np.full(n, 15.0),
                          _inconsistent=lambda *a, **k: (empty, empty),
                          _hopped=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
                          _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
     IdentityStage._vouch(tr, empty, np.arange(n), ctx, None, t)
     assert ctx.ST.tolist() == [OK, FLAGGED]
+
+
+def test_a_marker_whose_blob_was_disputed_does_not_resume_on_its_own_prediction():
+    # _disputed: flagged 'conflict' since its last ok frame (either direction of the pass)
+    from wingphoto.track.status import _R
+
+    T, N = 20, 3
+    res = SimpleNamespace(x=np.zeros((T, N)), reason=np.zeros((T, N), np.int8))
+    res.reason[8, 0] = _R["conflict"]
+    res.reason[8, 1] = _R["merged"]  # a precision flag: no dispute
+    res.reason[3, 2] = _R["conflict"]  # before its last ok frame: forgotten
+    me = SimpleNamespace(last_ok=np.array([5, 5, 5]))
+    np.testing.assert_array_equal(IdentityStage._disputed(me, np.arange(N), res, 12), [True, False, False])
+    back = SimpleNamespace(last_ok=np.array([15, 15, 15]))  # a backward pass
+    res.reason[12, 1] = _R["conflict"]
+    np.testing.assert_array_equal(IdentityStage._disputed(back, np.arange(N), res, 10), [False, True, False])

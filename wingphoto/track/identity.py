@@ -83,7 +83,7 @@ class IdentityStage:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
             far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
-            hop = unk[self._hopped(unk, res, t)]
+            hop = unk[self._hopped(unk, res, t) | self._disputed(unk, res, t)]
             sure = ST.copy()  # (the map is fitted to vouched neighbours only)
             sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
             odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
@@ -135,6 +135,24 @@ class IdentityStage:
             q = _apply_affine(M, Pi[None, :])[0]
             lim = max(2.5 + 2.0 * rms, ASTRAY_FRACTION * self._spacing[i])
             out[k] = math.hypot(X[i] - q[0], Y[i] - q[1]) > lim
+        return out
+
+    def _disputed(self, idx, res, t):
+        """Whether each marker of ``idx`` was flagged ``conflict`` (another marker took its
+        blob) since its last ok frame (boolean): which of the two then followed which blob
+        is not known, and a marker no neighbour can vouch for does not resume ok on its own
+        prediction after it. A marker in a merged pair drifted onto its neighbour's blob
+        over five flagged frames (conflict on two of them), then resumed ok on it, its
+        neighbours all flagged or lost: ok 6-11 px off for five frames until the audit could
+        judge it (independent renderer, clean16, fresh DEV seed 43 right)."""
+        out = np.zeros(idx.size, bool)
+        T = res.x.shape[0]
+        for k, i in enumerate(idx.tolist()):
+            t0 = int(self.last_ok[i])
+            if not 0 <= t0 < T:
+                continue
+            fr = np.arange(t0, t, 1 if t > t0 else -1)[1:]
+            out[k] = bool((res.reason[fr, i] == _R["conflict"]).any())
         return out
 
     def _hopped(self, idx, res, t):
