@@ -49,7 +49,7 @@ def test_without_two_still_markers_nothing_says_no():
     tk, picks, v = _tracker(1)
     moved = picks + [[vx, 0] for vx in v]
     assert tk._bump_holds(_solution(moved, moved), tk.hist_x, 3.0, 3.0)
-    assert tk._shift_miss(_solution(moved + 2.5, moved), tk.hist_x) is None
+    assert tk._shift_miss(_solution(moved + 2.5, moved)) is None
 
 
 def test_the_miss_is_measured_on_the_still_markers_alone():
@@ -57,7 +57,7 @@ def test_the_miss_is_measured_on_the_still_markers_alone():
     pred = picks + [[vx, 0] for vx in v] + [4.4, -3.3]  # the global shift's estimate
     found = picks + [[vx, 0] for vx in v] + [5.6, -5.1]  # the true bump
     found[3:, 0] += 1.7  # the wing's own miss (the motion model's error) must not count
-    miss = tk._shift_miss(_solution(found, pred), tk.hist_x)
+    miss = tk._shift_miss(_solution(found, pred))
     np.testing.assert_allclose(miss, [1.2, -1.8], atol=1e-9)
     # a miss below half a pixel is no miss
-    assert tk._shift_miss(_solution(pred + [0.3, 0.2], pred), tk.hist_x) is None
+    assert tk._shift_miss(_solution(pred + [0.3, 0.2], pred)) is None

@@ -47,6 +47,9 @@ _MOVING_PX = 1.0
 #: A frame on which most markers moving at least this fast (px/frame) are back where they
 #: were is a repeat (:meth:`Tracker._stalled`).
 _STALL_SPEED = 3.0
+#: A marker slower than this (px/frame) is still: it measures and confirms a camera shift
+#: (:meth:`Tracker._still_found`).
+_STILL_SPEED = 0.3
 #: Dropped-frame hypotheses tried (1 to _MAX_DROPPED frames), and the extra distance (px
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
@@ -175,6 +178,14 @@ class FrameContext:
         previous image: less the camera's shift, over the frames dropped in between too."""
         shift = np.zeros(2) if self.shift is None else self.shift
         return (np.asarray(disp, float) - shift) / (1 + max(self.aged, 0))
+
+
+def _model_speed(hist_x, hist_t):
+    """Each marker's speed (px a frame) over the last two points of its motion model's
+    history (NaN without two)."""
+    dt = np.abs(hist_t[:, 0] - hist_t[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.hypot(*(hist_x[:, 0] - hist_x[:, 1]).T) / dt
 
 
 def _median_residual(ctx, nh):
@@ -651,10 +662,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
     def _moving_now(self, speed=_MOVING_PX):
         """Markers whose motion model (three reliable points: not one just re-acquired with
         its neighbours' velocity) moves them at least ``speed`` px a frame (boolean)."""
-        dt = np.abs(self.hist_t[:, 0] - self.hist_t[:, 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            v = np.hypot(*(self.hist_x[:, 0] - self.hist_x[:, 1]).T) / dt
-        return (self.nh >= 3) & (v >= speed)
+        with np.errstate(invalid="ignore"):
+            return (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) >= speed)
 
     def _recover(self, frame, t, direction, ctx):
         """Explain a broken constellation by a glitch, or flag the frame.
@@ -686,9 +695,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                         hyps.append((0, sh.dx - s0.dx, sh.dy - s0.dy))
                 if math.hypot(sh.dx, sh.dy) > 1.0:
                     hyps.append((0, sh.dx, sh.dy))
-        best, best_key = None, (self._consistent(ctx)[1], -np.inf)
-        logger.debug("frame %d: as predicted: %d of %d markers where predicted (median residual %.2f px)",
-                     t, best_key[0], self._consistent(ctx)[0], _median_residual(ctx, self.nh))
+        n0, good0 = self._consistent(ctx)
+        best, best_key = None, (good0, -np.inf)
+        if logger.isEnabledFor(logging.DEBUG):
+            logger.debug("frame %d: as predicted: %d of %d markers where predicted (median residual %.2f px)",
+                         t, good0, n0, _median_residual(ctx, self.nh))
         refined = set()
         for dt, dx, dy in hyps:
             self._set_model(saved, dt, dx, dy, direction)
@@ -698,7 +709,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 logger.debug("frame %d: the still markers did not move by (%.2f, %.2f) px: no camera shift", t, dx, dy)
                 continue
             if dt == 0 and (dx, dy) not in refined:
-                corr = self._shift_miss(c, saved[0])
+                corr = self._shift_miss(c)
                 if corr is not None and all(math.hypot(dx + corr[0] - a, dy + corr[1] - b) > 0.25 for a, b in refined):
                     # (the image's global shift is pulled by the wing's own motion: the
                     # still markers found near their shifted predictions measure its miss)
@@ -740,15 +751,13 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                              best[1] + cx, best[2] + cy)
         return ctx
 
-    def _still_found(self, c, hx):
-        """Markers still by their motion model (speed below 0.3 px a frame over their last
-        two points ``hx``, the history before a hypothesis moved it; three points of
-        history) and found on ``c`` with ``min_score`` (indices): the mount and the
-        reference dots, which move on the image only when the camera does."""
-        dtk = np.abs(self.hist_t[:, 0] - self.hist_t[:, 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            v = np.hypot(hx[:, 0, 0] - hx[:, 1, 0], hx[:, 0, 1] - hx[:, 1, 1]) / dtk
-            m = (self.nh >= 3) & (v < 0.3) & c.fits & (c.gap == 1) & (c.S >= self.p.min_score)
+    def _still_found(self, c):
+        """Markers still by their motion model (speed below ``_STILL_SPEED``, three points
+        of history; a camera-shift hypothesis moves every point of a history alike, so the
+        speed is the one before it) and found on ``c`` with ``min_score`` (indices): the
+        mount and the reference dots, which move on the image only when the camera does."""
+        with np.errstate(invalid="ignore"):
+            m = (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) < _STILL_SPEED) & c.fits & (c.gap == 1) & (c.S >= self.p.min_score)
         return m.nonzero()[0]
 
     def _bump_holds(self, c, hx, dx, dy):
@@ -762,13 +771,13 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         neighbour's blob (independent renderer, dropped extra DEV seed 15 right: ok 44 px
         off, frames 90-99, with a first version of :meth:`_shift_miss` that measured the
         miss on all markers)."""
-        m = self._still_found(c, hx)
+        m = self._still_found(c)
         if m.size < 2:
             return True
         ex, ey = c.X[m] - hx[m, 0, 0], c.Y[m] - hx[m, 0, 1]
         return bool(np.median(np.hypot(ex - dx, ey - dy)) < np.median(np.hypot(ex, ey)))
 
-    def _shift_miss(self, c, hx):
+    def _shift_miss(self, c):
         """What a camera-shift hypothesis missed (px, (2,)): the per-axis median of the
         still markers' (:meth:`_still_found`) offsets from their shifted predictions, or
         None when fewer than 2 were found or the miss is below half a pixel. Only the still
@@ -776,7 +785,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         offsets fold the motion model's error into the shift, and frame after frame was
         "explained" by a new shift (a dropped frame on translating discs: markers slid to
         their neighbours, 28 px off)."""
-        m = self._still_found(c, hx)
+        m = self._still_found(c)
         if m.size < 2:
             return None
         corr = np.array([np.median(c.X[m] - c.pred[m, 0]), np.median(c.Y[m] - c.pred[m, 1])])
