@@ -83,11 +83,13 @@ class IdentityStage:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
             unk = np.setdiff1d(chk[np.abs(t - self.last_ok[chk]) > 1], np.concatenate([bad, good]))
             far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
-            hop = unk[self._hopped(unk, res, t) | self._disputed(unk, res, t)]
+            # (changed blob while not ok, or its blob was disputed: its own prediction may
+            # follow the wrong blob)
+            other_blob = unk[self._hopped(unk, res, t) | self._disputed(unk, res, t)]
             sure = ST.copy()  # (the map is fitted to vouched neighbours only)
             sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
             odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
-            bad = np.concatenate([bad, far, hop, odd]).astype(np.int64)
+            bad = np.concatenate([bad, far, other_blob, odd]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
 
