@@ -261,3 +261,16 @@ def test_a_marker_whose_blob_was_disputed_does_not_resume_on_its_own_prediction(
     back = SimpleNamespace(last_ok=np.array([15, 15, 15]))  # a backward pass
     res.reason[12, 1] = _R["conflict"]
     np.testing.assert_array_equal(IdentityStage._disputed(back, np.arange(N), res, 10), [False, True, False])
+
+
+def test_a_marker_flagged_jump_since_its_last_ok_frame_is_disputed_too():
+    # after a jump its own prediction may follow another blob (bumped DEV seed 30 right)
+    from wingphoto.track.status import _R
+
+    T, N = 20, 3
+    res = SimpleNamespace(x=np.zeros((T, N)), reason=np.zeros((T, N), np.int8))
+    res.reason[7, 0] = _R["jump"]
+    res.reason[7, 1] = _R["imprecise"]  # a precision flag: no dispute
+    res.reason[12, 2] = _R["jump"]  # on the frame being judged: not yet written, not read
+    me = SimpleNamespace(last_ok=np.array([5, 5, 5]))
+    np.testing.assert_array_equal(IdentityStage._disputed(me, np.arange(N), res, 12), [True, False, False])

@@ -410,6 +410,9 @@ def _build(key):
             if ST[i] == FLAGGED and is_soft[RS[i]] and not rel[i]:
                 return 10
         # ---- easy: commit
+        held = np.empty(n, np.bool_)  # (Tracker._poor_match, before the running score moves)
+        for i in range(n):
+            held[i] = S[i] < fpar[8] and S[i] < score_ref[i] - fpar[9] and sig[i] > fpar[10] * fpar[2]
         _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, rrms, last_score, last_ok, mass_ref, score_ref,
                         last_upd, upd_par, upd)
         for i in range(n):
@@ -420,6 +423,9 @@ def _build(key):
             res_ypix[t, i] = YP[i]
             res_status[t, i] = ST[i]
             res_reason[t, i] = RS[i]
+            if ST[i] == OK and held[i]:
+                res_status[t, i] = FLAGGED
+                res_reason[t, i] = _IMPRECISE
             res_sigma[t, i] = sig[i] if np.isfinite(X[i]) else np.nan
             pos[i, 0] = X[i]
             pos[i, 1] = Y[i]
@@ -437,7 +443,7 @@ def _build(key):
         """One steady frame of :meth:`Tracker.step` (see the module docstring).
 
         ``fpar``: min_mass_ratio, min_score, max_sigma, _FADED, _WEAK, _BG_RESIDUAL_FADED,
-        _CONSTELLATION, _STAY (1.0/0.0). Returns 0 when the frame was
+        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN. Returns 0 when the frame was
         handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
         positions), -1 when it was handled and templates are due for an update (``upd``),
         else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
@@ -473,7 +479,7 @@ def _params(tr):
                          p.ambiguity_margin, p.jump_px, _MERGE_VALLEY, _BRIDGE])
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
     fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._FADED, tk._WEAK, tk._BG_RESIDUAL_FADED,
-                     tk._CONSTELLATION, 1.0 if tk._STAY else 0.0])
+                     tk._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN])
     return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=tk._SAMPLE, p=p)
 
 

@@ -12,6 +12,10 @@ from .reacquire import _determined
 from .relocate import STILL_PX
 from .status import _R, FLAGGED, OK
 
+#: Reasons that put a marker's blob in doubt: after one, a marker no neighbour can vouch for
+#: does not resume ok on its own prediction (:meth:`IdentityStage._disputed`).
+_DISPUTED = (_R["conflict"], _R["jump"])
+
 #: A step of a marker's path while not ok that differs from the step before by more than
 #: this fraction of its spacing is a hop onto another blob (:meth:`IdentityStage._hopped`).
 HOP_FRACTION = 0.4
@@ -141,12 +145,17 @@ class IdentityStage:
 
     def _disputed(self, idx, res, t):
         """Whether each marker of ``idx`` was flagged ``conflict`` (another marker took its
-        blob) since its last ok frame (boolean): which of the two then followed which blob
-        is not known, and a marker no neighbour can vouch for does not resume ok on its own
-        prediction after it. A marker in a merged pair drifted onto its neighbour's blob
-        over five flagged frames (conflict on two of them), then resumed ok on it, its
-        neighbours all flagged or lost: ok 6-11 px off for five frames until the audit could
-        judge it (independent renderer, clean16, fresh DEV seed 43 right)."""
+        blob) or ``jump`` (it left its prediction, or its neighbours put it elsewhere) since
+        its last ok frame (boolean): which blob it then followed is not known, and a marker
+        no neighbour can vouch for does not resume ok on its own prediction after it. A
+        marker in a merged pair drifted onto its neighbour's blob over five flagged frames
+        (conflict on two of them), then resumed ok on it, its neighbours all flagged or
+        lost: ok 6-11 px off for five frames until the audit could judge it (independent
+        renderer, clean16, fresh DEV seed 43 right). After a jump, flagged ``imprecise``
+        positions 21 px off fed the motion model for twelve frames (an imprecise point
+        feeds it) and the marker resumed ok on a neighbour's blob, 10-12 px off, its
+        neighbours all lost (bumped DEV seed 30 right, with the poor-match margin of
+        :meth:`~.tracker.Tracker._poor_match` in an early form)."""
         out = np.zeros(idx.size, bool)
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
@@ -154,7 +163,7 @@ class IdentityStage:
             if not 0 <= t0 < T:
                 continue
             fr = np.arange(t0, t, 1 if t > t0 else -1)[1:]
-            out[k] = bool((res.reason[fr, i] == _R["conflict"]).any())
+            out[k] = bool(np.isin(res.reason[fr, i], _DISPUTED).any())
         return out
 
     def _hopped(self, idx, res, t):
