@@ -945,15 +945,15 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         """Markers whose poor match holds them to a margin on sigma (boolean): score below
         ``_POOR_MATCH`` and more than ``_POOR_DROP`` below the running score, sigma above
         ``_POOR_MARGIN`` of ``max_sigma``. Such an ok point is *reported* flagged
-        ``imprecise``; the tracker still takes it as ok (it feeds the motion model and is
-        the marker's last ok frame), since its identity passed every rule and only the
-        report needs the margin. Flagging it in the status rules instead cost our
-        ``hard_stroke`` DEV 0.7 points of ok share through what follows a flag (a resuming
-        marker is vouched for again, searched wide), against 0.2 for this.
+        ``imprecise``; the tracker still takes it as ok (it feeds the motion model, is the
+        marker's last ok frame, and is not vouched for or searched wide again), since its
+        identity passed every rule: the margin changes the report, not the course of the
+        tracking.
 
-        A chronically poor match (a fast, blurred marker whose template never matches well:
-        ``hard_stroke`` DEV seed 0 left, 50 frames at score 0.76, 0.08 px off) is not held,
-        only a fall."""
+        Only a fall is held, not a chronically poor match: without the fall the margin cost
+        our ``hard_stroke`` DEV 0.7 points of ok share (94.8 -> 94.1 %), nearly all of it one
+        fast, blurred marker whose template never matches well (seed 0 left, 50 frames at
+        score 0.76, 0.08 px off); with it, 0.2."""
         with np.errstate(invalid="ignore"):
             return ((S < _POOR_MATCH) & (S < self.score_ref - _POOR_DROP)
                     & (sigma > _POOR_MARGIN * self.p.max_sigma))
