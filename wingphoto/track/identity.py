@@ -404,12 +404,43 @@ class IdentityStage:
         my = (origin[:, 1] + v).astype(np.float64)
         wsel = wide[idx]
         if wsel.any():
+            # (the nearest blob only: a best peak further than half the spacing from where the
+            # marker was may be a neighbour's, and then so may the neighbours' best peaks)
+            near = wsel & (np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) < 0.5 * self._spacing[idx])
+            second[near] = self._runner_up_by_matches(idx[near], maps[near], shp[near], origin[near], excl[near],
+                                                      idx, mx, my, pred, j2)
             self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl)
         XP[idx] = mx
         YP[idx] = my
         S[idx] = score
         SEC[idx] = second
 
+
+    @staticmethod
+    def _runner_up_by_matches(widx, maps, shp, origin, excl, idx, mx, my, pred, j2):
+        """Runner-up scores of the wide-searched markers ``widx`` (no velocity yet), a peak
+        on the blob a neighbour matched on this frame not counted (its best pixel, if it was
+        searched: ``idx``, ``mx, my``; else its prediction).
+
+        The runner-up search leaves out the neighbours' *predicted* positions; without a
+        velocity those are where the neighbours were, and on a wing moving fast at frame 0
+        each marker's runner-up was its neighbour's blob a few pixels on: every wing marker
+        ``ambiguous`` on frame 1, none fed its motion model, so frame 2 was searched wide
+        again, and so on until all were lost (independent renderer, DEV seed 56 left,
+        markers 12-14 px apart moving 2-7 px/frame; the best peaks were right). Only for a
+        best peak within half the spacing of where the marker was (the caller): on a grid of
+        equal still discs a wide search took each disc's neighbour's blob, 20 px off, and
+        the neighbours' best peaks, shifted alike, explained each disc's own blob away."""
+        at = np.full((len(pred), 2), np.nan)
+        at[:] = pred
+        at[idx, 0], at[idx, 1] = mx, my
+        others = []
+        for k in range(2):
+            jj = j2[widx, k]
+            o = at[np.maximum(jj, 0)] - origin
+            o[jj < 0] = np.nan
+            others.append(o)
+        return _analyse_maps(maps, shp, excl, others)[3]
 
     def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
