@@ -420,7 +420,7 @@ class IdentityStage:
     def _runner_up_by_matches(widx, maps, shp, origin, excl, idx, mx, my, pred, j2):
         """Runner-up scores of the wide-searched markers ``widx`` (no velocity yet), a peak
         on the blob a neighbour matched on this frame not counted (its best pixel, if it was
-        searched: ``idx``, ``mx, my``; else its prediction).
+        searched: ``idx``, ``mx, my``), nor one at its prediction (as for every search).
 
         The runner-up search leaves out the neighbours' *predicted* positions; without a
         velocity those are where the neighbours were, and on a wing moving fast at frame 0
@@ -431,15 +431,15 @@ class IdentityStage:
         best peak within half the spacing of where the marker was (the caller): on a grid of
         equal still discs a wide search took each disc's neighbour's blob, 20 px off, and
         the neighbours' best peaks, shifted alike, explained each disc's own blob away."""
-        at = np.full((len(pred), 2), np.nan)
-        at[:] = pred
+        at = np.array(pred, dtype=np.float64)
         at[idx, 0], at[idx, 1] = mx, my
         others = []
-        for k in range(2):
-            jj = j2[widx, k]
-            o = at[np.maximum(jj, 0)] - origin
-            o[jj < 0] = np.nan
-            others.append(o)
+        for where in (pred, at):  # (as before, and where the neighbours matched)
+            for k in range(2):
+                jj = j2[widx, k]
+                o = where[np.maximum(jj, 0)] - origin
+                o[jj < 0] = np.nan
+                others.append(o)
         return _analyse_maps(maps, shp, excl, others)[3]
 
     def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
