@@ -42,7 +42,7 @@ _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
 #: of ``max_sigma`` (:meth:`Tracker._poor_match`): the blob changed, most often as a
 #: neighbour's ran into it, and its centre carries a bias the image terms of sigma do not
 #: see (independent renderer, DEV seeds 3-52: all 9 ok points more than 1 px off had a score
-#: of 0.78-0.84 and sigma 0.22-0.25)
+#: of 0.78-0.84 and sigma 0.21-0.25)
 _POOR_MATCH, _POOR_DROP, _POOR_MARGIN = 0.85, 0.03, 0.8
 #: The constellation is broken when fewer than this share of the markers with a velocity
 #: are found where predicted.
@@ -945,10 +945,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         """Markers whose poor match holds them to a margin on sigma (boolean): score below
         ``_POOR_MATCH`` and more than ``_POOR_DROP`` below the running score, sigma above
         ``_POOR_MARGIN`` of ``max_sigma``. Such an ok point is *reported* flagged
-        ``imprecise``; the tracker still takes it as ok (it feeds the motion model, is the
-        marker's last ok frame, and is not vouched for or searched wide again), since its
-        identity passed every rule: the margin changes the report, not the course of the
-        tracking.
+        ``imprecise``; the tracker's own state still takes it as ok (it feeds the motion
+        model, is the marker's last ok frame, and is not vouched for or searched wide
+        again), since its identity passed every rule. Only the written row changes (the
+        checks that later read the written rows - a resuming marker's path, the audit - see
+        it flagged).
 
         Only a fall is held, not a chronically poor match: without the fall the margin cost
         our ``hard_stroke`` DEV 0.7 points of ok share (94.8 -> 94.1 %), nearly all of it one
