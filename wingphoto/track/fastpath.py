@@ -389,6 +389,8 @@ def _build(key):
                 Y[i] = np.nan
             if RS[i] == _JUMP:
                 return 9
+            if ST[i] == FLAGGED and RS[i] == _IMPRECISE and abs(t - last_ok[i]) > 1:
+                return 9  # it may have been disputed since (Tracker._update reads the rows)
             if ST[i] == OK and (abs(t - last_ok[i]) > 1 or nh[i] < 3) and not stay:
                 return 9
         for i in range(n):

@@ -920,6 +920,18 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             astray = fl[self._astray(fl, X, Y, ST, res, t)]
             rel[astray] = False
             RS[astray] = _R["jump"]
+        imp = (rel & (ST == FLAGGED) & (RS == _R["imprecise"])).nonzero()[0]
+        if imp.size:
+            # an imprecise point of a marker disputed since its last ok frame may be on
+            # another blob: it does not feed the model (black DEV seed 61 left: after a
+            # jump, a marker ran 68-172 px off for 50 frames, fed by its own imprecise
+            # positions, and misled re-acquisition onto a neighbour's blob)
+            dis = imp[self._disputed(imp, res, t)]
+            if dis.size:
+                rel[dis] = False
+                # unless its neighbours vouch for it: a real dot falsely flagged 'jump'
+                # at a reversal then coasted off its dot, lost, and was found 12 px off
+                rel[self._inconsistent(dis, X, Y, ST, res, t, since="fed")] = True
         if ctx.glitch or ctx.aged < 0:
             rel[:] = False  # nothing new: an unexplained frame, or a repeat of the last one
         held = self._poor_match(S, ctx.sigma)  # (before the model moves the running score)
