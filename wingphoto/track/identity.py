@@ -14,7 +14,7 @@ from .status import _R, FLAGGED, OK
 
 #: Reasons that put a marker's blob in doubt: after one, a marker no neighbour can vouch for
 #: does not resume ok on its own prediction (:meth:`IdentityStage._disputed`).
-_DISPUTED = (_R["conflict"], _R["jump"])
+_DISPUTED = (_R["conflict"], _R["jump"], _R["merged"])
 
 #: A step of a marker's path while not ok that differs from the step before by more than
 #: this fraction of its spacing is a hop onto another blob (:meth:`IdentityStage._hopped`).
@@ -22,6 +22,11 @@ HOP_FRACTION = 0.4
 #: A step shorter than this (px) between two longer ones is a one-frame stall (a repeated
 #: frame), not part of a hop (:meth:`IdentityStage._hopped`).
 STALL_PX = 0.5
+#: ... and the path resumes within this fraction of the hop limit (on schedule, or one
+#: frame late). With the whole hop limit, a marker slowing at a reversal (0.4 px/frame)
+#: before a 9 px hop onto a neighbour's blob was a 'stall' that hid the hop: it resumed
+#: ok there, 10 px off (independent renderer, black, fresh DEV seed 57 right).
+STALL_RESUME = 0.5
 #: A flagged marker further than this fraction of its spacing (and than the neighbours'
 #: tolerance) from where its neighbours put it is astray (:meth:`IdentityStage._astray`).
 ASTRAY_FRACTION = 0.4
@@ -200,7 +205,7 @@ class IdentityStage:
             for j in range(2, fr.size - 1):  # a one-frame stall (a repeated frame) comes back
                 if cons[j - 2] and cons[j - 1] and cons[j] and math.hypot(*V[j - 1]) < STALL_PX:
                     back = P[j + 1] - (P[j - 1] + 2.0 * V[j - 2])  # or resumes one frame late
-                    keep[j] = min(math.hypot(*back), math.hypot(*(V[j] - V[j - 2]))) > lim
+                    keep[j] = min(math.hypot(*back), math.hypot(*(V[j] - V[j - 2]))) > STALL_RESUME * lim
             fr, P = fr[keep], P[keep]
             cons = np.abs(np.diff(fr)) == 1
             V = np.diff(P, axis=0)
