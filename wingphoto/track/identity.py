@@ -150,9 +150,11 @@ class IdentityStage:
 
     def _disputed(self, idx, res, t):
         """Whether each marker of ``idx`` was flagged ``conflict`` (another marker took its
-        blob) or ``jump`` (it left its prediction, or its neighbours put it elsewhere) since
-        its last ok frame (boolean): which blob it then followed is not known, and a marker
-        no neighbour can vouch for does not resume ok on its own prediction after it. A
+        blob), ``jump`` (it left its prediction, or its neighbours put it elsewhere) or
+        ``merged`` (its blob ran into a neighbour's) since its last ok frame (boolean):
+        which blob it then followed is not known, and a marker no neighbour can vouch for
+        does not resume ok on its own prediction after it, nor do its ``imprecise``
+        positions feed its motion model (:meth:`~.tracker.Tracker._update`). A
         marker in a merged pair drifted onto its neighbour's blob over five flagged frames
         (conflict on two of them), then resumed ok on it, its neighbours all flagged or
         lost: ok 6-11 px off for five frames until the audit could judge it (independent
