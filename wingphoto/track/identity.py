@@ -156,7 +156,7 @@ class IdentityStage:
         do its ``imprecise`` positions feed its motion model unless its neighbours vouch
         for them (:meth:`~.tracker.Tracker._update`). Not ``merged``: counted as a dispute
         it made a pair of markers swap blobs, ok 12 px off (independent repeated DEV seed
-        7 left) and cost up to 5 points of ok share, for 2 errors it removed. A
+        7 left; 5 points of that sequence's ok share), for 2 errors it removed. A
         marker in a merged pair drifted onto its neighbour's blob over five flagged frames
         (conflict on two of them), then resumed ok on it, its neighbours all flagged or
         lost: ok 6-11 px off for five frames until the audit could judge it (independent
