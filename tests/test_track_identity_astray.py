@@ -240,6 +240,7 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
                          _inconsistent=lambda *a, **k: (empty, empty),
                          _hopped=lambda idx, res, t: np.zeros(idx.size, bool),
                          _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
                          _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
@@ -274,3 +275,32 @@ def test_a_marker_flagged_jump_since_its_last_ok_frame_is_disputed_too():
     res.reason[12, 2] = _R["jump"]  # on the frame being judged: not yet written, not read
     me = SimpleNamespace(last_ok=np.array([5, 5, 5]))
     np.testing.assert_array_equal(IdentityStage._disputed(me, np.arange(N), res, 12), [True, False, False])
+
+
+def test_a_marker_merged_with_a_neighbour_since_lost_is_in_doubt():
+    # _merged_with_lost: marker 0 shared marker 1's blob on frame 8, and 1 has not been ok
+    # since (clean16 fresh DEV seed 66 right: 0 resumed ok on 1's blob, 8-16 px off)
+    from wingphoto.track.status import LOST, _R
+
+    T, N = 20, 4
+    res = SimpleNamespace(x=np.full((T, N), np.nan), y=np.full((T, N), np.nan),
+                          reason=np.zeros((T, N), np.int8))
+    res.x[:, :], res.y[:, :] = np.array([0.0, 1.0, 40.0, 80.0]), 0.0
+    res.reason[8, 0] = _R["merged"]
+    st = SimpleNamespace(last_ok=np.array([5, 7, 5, 5]), rb=np.full(N, 3.0))
+    ST = np.array([OK, LOST, OK, OK], np.int8)
+    idx = np.array([0, 2])
+    np.testing.assert_array_equal(IdentityStage._merged_with_lost(st, idx, ST, res, 12), [True, False])
+    ST[1] = OK  # the partner is ok again now: both blobs are known
+    assert not IdentityStage._merged_with_lost(st, idx, ST, res, 12).any()
+    ST[1] = FLAGGED
+    st.last_ok[1] = 10  # ok after the merger: the two were told apart then
+    assert not IdentityStage._merged_with_lost(st, idx, ST, res, 12).any()
+    st.last_ok[1] = 7
+    res.x[8, 1] = 9.0  # the merged flag was for another blob, 9 px away
+    assert not IdentityStage._merged_with_lost(st, idx, ST, res, 12).any()
+    res.x[8, 1] = 1.0
+    back = SimpleNamespace(last_ok=np.array([15, 15, 15, 15]), rb=np.full(N, 3.0))  # a backward pass
+    res.reason[:] = 0
+    res.reason[11, 0] = _R["merged"]
+    np.testing.assert_array_equal(IdentityStage._merged_with_lost(back, idx, ST, res, 10), [True, False])
