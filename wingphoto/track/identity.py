@@ -42,6 +42,14 @@ CONTRADICT_NEIGHBOURS = 3
 CONTRADICT_AMPLIFY = 8.0
 
 
+def _frames_since(t0, t, T):
+    """The frames strictly between a marker's last ok frame ``t0`` and frame ``t``, in the
+    order of the pass (none when ``t0`` is not a frame of the ``T`` rows)."""
+    if not 0 <= t0 < T:
+        return np.zeros(0, np.int64)
+    return np.arange(t0, t, 1 if t > t0 else -1)[1:]
+
+
 class IdentityStage:
     """Identity checks of :class:`~wingphoto.track.tracker.Tracker`.
 
@@ -167,12 +175,8 @@ class IdentityStage:
         neighbours all lost (bumped DEV seed 30 right, with the poor-match margin of
         :meth:`~.tracker.Tracker._poor_match` in an early form)."""
         out = np.zeros(idx.size, bool)
-        T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
-            t0 = int(self.last_ok[i])
-            if not 0 <= t0 < T:
-                continue
-            fr = np.arange(t0, t, 1 if t > t0 else -1)[1:]
+            fr = _frames_since(int(self.last_ok[i]), t, res.x.shape[0])
             out[k] = bool(np.isin(res.reason[fr, i], _DISPUTED).any())
         return out
 
@@ -189,12 +193,8 @@ class IdentityStage:
         (and misled its neighbour 17's re-acquisition onto its own blob); seed 53 left:
         markers 9 and 10 the same, 6-8 px off."""
         out = np.zeros(idx.size, bool)
-        T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
-            t0 = int(self.last_ok[i])
-            if not 0 <= t0 < T:
-                continue
-            fr = np.arange(t0, t, 1 if t > t0 else -1)[1:]
+            fr = _frames_since(int(self.last_ok[i]), t, res.x.shape[0])
             fr = fr[(res.reason[fr, i] == _R["merged"]) & np.isfinite(res.x[fr, i])]
             for f in fr.tolist():
                 d = np.hypot(res.x[f] - res.x[f, i], res.y[f] - res.y[f, i])
