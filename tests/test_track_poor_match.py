@@ -60,3 +60,21 @@ def test_the_merging_pair_is_reported_imprecise_in_both_engines(merging_pair, nu
         assert err.max() < 1.0
     if len(runs) == 2:
         assert runs[0][["status", "reason"]].equals(runs[1][["status", "reason"]])
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_peak_analysis_of_no_maps(compiled):
+    """No map to analyse (no wide-searched marker near its last place): empty results from
+    both engines (the numpy twin's cv2.dilate raised on 0 maps: independent clean DEV seed 2
+    left crashed without numba)."""
+    from wingphoto.track import engine
+    from wingphoto.track.match import _analyse_maps
+    if compiled and not engine.NUMBA_AVAILABLE:
+        pytest.skip("numba not installed")
+    try:
+        engine.try_numba(compiled)
+        out = _analyse_maps(np.zeros((0, 9, 9), np.float32), np.zeros((0, 2), np.int64), np.zeros(0),
+                            [np.zeros((0, 2))])
+    finally:
+        engine.try_numba(True)
+    assert [len(a) for a in out] == [0] * 5

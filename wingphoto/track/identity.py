@@ -449,9 +449,8 @@ class IdentityStage:
             # (the nearest blob only: a best peak further than half the spacing from where the
             # marker was may be a neighbour's, and then so may the neighbours' best peaks)
             near = wsel & (np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) < 0.5 * self._spacing[idx])
-            if near.any():  # (the numpy twin of _analyse_maps cannot take 0 maps)
-                second[near] = self._runner_up_by_matches(idx[near], maps[near], shp[near], origin[near], excl[near],
-                                                          idx, mx, my, pred, j2)
+            second[near] = self._runner_up_by_matches(idx[near], maps[near], shp[near], origin[near], excl[near],
+                                                      idx, mx, my, pred, j2)
             self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl)
         XP[idx] = mx
         YP[idx] = my

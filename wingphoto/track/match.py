@@ -285,6 +285,9 @@ def _analyse_maps(maps, shape, excl, others=()):
         runner-up search (other markers' expected positions), NaN for none.
     """
     n, m, _ = maps.shape
+    if n == 0:  # (the numpy twin's reshapes and cv2.dilate cannot take 0 maps)
+        e = np.empty(0)
+        return e.astype(np.int64), e.astype(np.int64), e, e, e.astype(bool)
     if engine.use_numba():
         oth = np.full((n, max(len(others), 1), 2), np.nan)
         for q, o in enumerate(others):
