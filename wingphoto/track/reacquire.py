@@ -278,7 +278,7 @@ class ReacquireStage:
         # where a wing marker went (they would keep it at its last position). One that was
         # still when last seen may be a static dot or a wing marker lost at rest: every
         # anchor may speak for it (its wing neighbours tell it from a static dot).
-        moving = _was_moving(self)
+        moving = _was_moving(self, res)
         anchor_away = _moving(self, X, Y, anchor)  # (anchors have positions)
         q = {}
         for i in lost.tolist():

@@ -72,6 +72,13 @@ PATCH_HALF, VEL_SCORE, VEL_SHARE, VEL_RMS = 15, 0.7, 0.8, 1.5
 #: A marker within this distance (px) of its reference position is still: the static
 #: mount and dots (or a wing at rest), told apart from the moving wing.
 STILL_PX = 1.5
+#: A marker ever written this far (px) from its reference position is a wing marker, even
+#: when lost at rest where it was on the reference frame (a camera's bump moves the static
+#: dots by a few px only): the static dots must not place it. Independent renderer,
+#: repeated, extra DEV seed 5 left: marker 17, lost at a stroke reversal within 1.5 px of
+#: its frame-0 position, was placed there by five static dots 10 frames later (one wing
+#: neighbour, an outlier of their map) and re-acquired on marker 19's blob, 33 px off.
+ROAM_PX = 15.0
 
 
 def find_candidates(frame, template, *, min_score=CANDIDATE_SCORE, radius=2, exclude=None, max_n=MAX_CANDIDATES):
@@ -342,17 +349,21 @@ def _velocity(prev, frame, pts, radius, half=PATCH_HALF):
     return pts - _apply_affine(M, np.asarray(pts, float))
 
 
-def _was_moving(tr):
+def _was_moving(tr, res=None):
     """Markers that were moving when last seen - away from their reference position, or
     faster than 0.3 px a frame - as :mod:`.reacquire` tells the wing from the static dots
-    (a static dot hidden by the wing is not fitted with the wing's constellation)."""
+    (a static dot hidden by the wing is not fitted with the wing's constellation); with
+    the results ``res``, also those written :data:`ROAM_PX` or more from their reference
+    position on any frame (a wing marker lost at rest where it was on the reference frame)."""
     p0 = tr.hist_x[:, 0]
     away = np.hypot(p0[:, 0] - tr.ref_pos[:, 0], p0[:, 1] - tr.ref_pos[:, 1]) >= STILL_PX
     dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1]).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         v = np.hypot(*(tr.hist_x[:, 0] - tr.hist_x[:, 1]).T) / dt
+        roamed = False if res is None else (
+            np.hypot(res.x - tr.ref_pos[:, 0], res.y - tr.ref_pos[:, 1]) >= ROAM_PX).any(0)
     fast = (tr.nh >= 2) & (dt > 0) & (v >= 0.3)
-    return away | fast
+    return away | fast | roamed
 
 
 def _moving(tr, X, Y, sel):
