@@ -150,31 +150,34 @@ TEX_INSET = 4.5
 #: more than 0.11 px off): a flat background costs nothing.
 QUAD_MIN, QUAD_BGRES = 12, 0.03
 #: A marker near the membrane's edge (or a shadow's) has the dark side of the edge in its
-#: ring: a plane fitted there tilts towards it, and the disk's pixels on that side,
-#: background above the tilted plane, pull the centre towards the edge (0.3-1 px on the
-#: independent renders' markers within ~3 mm of the wing's border, flagged
-#: ``imprecise``). The least-squares plane spreads the step into a slope, so no ring pixel
-#: stands out from it; instead, where the plane fits the ring badly (``bgres`` above
-#: QUAD_BGRES), planes are also fitted without each arc of EDGE_ARCS octants (45 deg
-#: sectors about the disk's centre pixel, :func:`_octant`; the dark side of a straight
-#: edge is one arc), and the one with the least median
-#: absolute residual over the whole ring (least median of squares: robust while the
-#: dark side is under half the ring) is taken when it is EDGE_GAIN times better than the
-#: full plane and the pixels it left out are darker than those it kept by the foreign
-#: threshold (FOREIGN_FRACTION of the peak, FOREIGN_NOISE noise sigmas): the disk is
-#: painted on the bright side (a steep plane through the dark side, leaving out a bright
-#: glare on the other, put a centre 1.1 px off with sigma 0.23). The background is then the plane refitted on the ring pixels within
-#: EDGE_INLIER robust sigmas (1.4826 x the median absolute residual, at least the
-#: noise) of it, while EDGE_MIN of them remain. The model holds only where the edge
-#: passes beyond the marker's own blob: it is kept when at most EDGE_SHARE of the ring
-#: was left out (a straight edge then stays ~0.6 of the ring's radius away; nearer, the
-#: blob straddles the edge, neither background is right, and the full plane was the
-#: better guess: 0.15-0.25 px worse with the rule on a marker 2 mm from the trailing
-#: edge) and the bright side is a plane (the refitted ring's RMS residual at most
-#: EDGE_FIT of the peak; beyond it, at 65-90 deg views, the rule moved centres by 1-4 px).
-#: On 5 DEV sequences' wing markers (clean and hard seeds 3-4, black 51, every other
-#: frame, disks of 6 and 8 px), the rule then mended 239 centres by > 0.1 px and worsened
-#: none by as much (it was 294 and 33 without these two limits).
+#: ring: the least-squares plane tilts towards it (spreading the step into a slope, so no
+#: ring pixel stands out), and the disk's pixels on that side, above the tilted plane,
+#: pull the centre 0.3-1 px towards the edge (independent renders: markers within ~3 mm
+#: of the wing's border, flagged ``imprecise``). So where the ring fits its plane badly
+#: (``bgres`` above QUAD_BGRES), planes are also fitted without each arc of EDGE_ARCS
+#: octants (:func:`_octant`; the dark side of a straight edge is one arc). The one with
+#: the least median absolute residual over the whole ring (least median of squares:
+#: robust while the dark side is under half the ring) is taken
+#:
+#: * when it is EDGE_GAIN times better than the full plane's,
+#: * when the pixels it left out are darker than those it kept by the foreign threshold
+#:   (FOREIGN_FRACTION of the peak, FOREIGN_NOISE noise sigmas): the disk is painted on
+#:   the bright side (a steep plane through the dark side that left out a glare on the
+#:   other put a centre 1.1 px off at sigma 0.23);
+#:
+#: then refitted on the ring pixels within EDGE_INLIER robust sigmas of it (1.4826 x its
+#: median absolute residual, at least the noise), and kept
+#:
+#: * when EDGE_MIN or more pixels remain and at most EDGE_SHARE of the ring was left out:
+#:   the edge then passes beyond the marker's own blob (nearer, the blob straddles the
+#:   edge, neither background is right, and the full plane was the better guess: 0.15-0.25
+#:   px worse with the rule on a marker 2 mm from the trailing edge),
+#: * when the bright side is a plane (RMS residual at most EDGE_FIT of the peak; beyond,
+#:   at 65-90 deg views, the rule moved centres 1-4 px).
+#:
+#: On 7 DEV sequences' wing markers at their true positions (clean and hard seeds 3-5,
+#: black 51, clean16 6; every other frame; disks of 6 and 8 px) it mended 223 centres by
+#: more than 0.1 px and worsened none by 0.05 px.
 EDGE_ARCS, EDGE_GAIN, EDGE_INLIER, EDGE_MIN, EDGE_SHARE, EDGE_FIT = (2, 3, 4), 0.5, 3.0, 8, 0.3, 0.06
 
 
@@ -191,13 +194,20 @@ def _octant(u, v):
     return 6 if u < -v else 7
 
 
+@jit
+def _in_arc(u, v, s0, m):
+    """Whether pixel offset (u, v) lies in the arc of ``m`` octants from octant ``s0``."""
+    return (_octant(u, v) - s0) % 8 < m
+
+
 def _edge_arcs(grid):
     """(A, K) bool: the patch pixels each candidate arc leaves out (see :data:`EDGE_ARCS`)."""
     key = ("arcs", grid.hc)
     arcs = _OFFSETS.get(key)
     if arcs is None:
-        octs = np.array([_octant(int(u), int(v)) if (u or v) else -1 for u, v in zip(grid.gx, grid.gy)])
-        arcs = np.array([((octs - s0) % 8 < m) & (octs >= 0) for m in EDGE_ARCS for s0 in range(8)])
+        uv = [(int(u), int(v)) for u, v in zip(grid.gx, grid.gy)]
+        arcs = np.array([[bool(u or v) and _in_arc(u, v, s0, m) for u, v in uv]
+                         for m in EDGE_ARCS for s0 in range(8)])
         _OFFSETS[key] = arcs
     return arcs
 
@@ -467,16 +477,17 @@ def _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi):
 
 
 @jit
-def _ring_plane(ru, rv, rval, routl, nr):
-    """Plane fitted to the ring pixels not marked in ``routl`` (see :func:`_solve_plane`)."""
-    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
+def _ring_plane(ru, rv, rval, routl, nr, s0=0, m=0):
+    """Plane fitted to the ring pixels not marked in ``routl`` nor in the arc of ``m``
+    octants from octant ``s0`` (:func:`_in_arc`; none for m = 0), see :func:`_solve_plane`."""
+    s_0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
     for k in range(nr):
-        if routl[k]:
+        if routl[k] or (m > 0 and _in_arc(ru[k], rv[k], s0, m)):
             continue
         u = ru[k]
         v = rv[k]
         val = rval[k]
-        s0 += 1.0
+        s_0 += 1.0
         sx += u
         sy += v
         sxx += u * u
@@ -485,7 +496,7 @@ def _ring_plane(ru, rv, rval, routl, nr):
         si += val
         sxi += u * val
         syi += v * val
-    return _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
+    return _solve_plane(s_0, sx, sy, sxx, sxy, syy, si, sxi, syi)
 
 
 @jit
@@ -624,34 +635,6 @@ def _median_inplace(a, lo, n):
 
 
 @jit
-def _in_arc(u, v, s0, m):
-    """Whether pixel offset (u, v) lies in the arc of ``m`` octants from octant ``s0``."""
-    return (_octant(u, v) - s0) % 8 < m
-
-
-@jit
-def _ring_plane_arc(ru, rv, rval, routl, nr, s0, m):
-    """:func:`_ring_plane` without the ring pixels in the arc (s0, m) (see :func:`_in_arc`)."""
-    s_0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
-    for k in range(nr):
-        if routl[k] or _in_arc(ru[k], rv[k], s0, m):
-            continue
-        u = ru[k]
-        v = rv[k]
-        val = rval[k]
-        s_0 += 1.0
-        sx += u
-        sy += v
-        sxx += u * u
-        sxy += u * v
-        syy += v * v
-        si += val
-        sxi += u * val
-        syi += v * val
-    return _solve_plane(s_0, sx, sy, sxx, sxy, syy, si, sxi, syi)
-
-
-@jit
 def _ring_abs_median(ru, rv, rval, routl, nr, pa, pb, pc, rabs):
     """Median absolute residual of the clean ring pixels about a plane (``rabs``: scratch)."""
     n = 0
@@ -684,7 +667,7 @@ def _edge_plane(ru, rv, rval, routl, nr, du, dv, dval, nd, pa, pb, pc, step, noi
                         skeep += rval[k]
             if cnt < EDGE_MIN or narc == 0 or not sarc / narc < skeep / cnt - step:
                 continue
-            a, b, c = _ring_plane_arc(ru, rv, rval, routl, nr, s0, m)
+            a, b, c = _ring_plane(ru, rv, rval, routl, nr, s0, m)
             med = _ring_abs_median(ru, rv, rval, routl, nr, a, b, c, rabs)
             if med < best_m:
                 best_m = med
