@@ -635,6 +635,19 @@ def _median_inplace(a, lo, n):
 
 
 @jit
+def _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc):
+    """RMS residual (NaN for none) and count of the clean ring pixels about a plane."""
+    s2 = 0.0
+    n = 0
+    for k in range(nr):
+        if routl[k] == 0:
+            e = rval[k] - (pa + pb * ru[k] + pc * rv[k])
+            s2 += e * e
+            n += 1
+    return (np.sqrt(s2 / n) if n > 0 else np.nan), n
+
+
+@jit
 def _ring_abs_median(ru, rv, rval, routl, nr, pa, pb, pc, rabs):
     """Median absolute residual of the clean ring pixels about a plane (``rabs``: scratch)."""
     n = 0
@@ -689,13 +702,7 @@ def _edge_plane(ru, rv, rval, routl, nr, du, dv, dval, nd, pa, pb, pc, step, noi
         if routl[k] == 0 and abs(rval[k] - (ba + bb * ru[k] + bc * rv[k])) > lim:
             routl[k] = 2
     a, b, c = _ring_plane(ru, rv, rval, routl, nr)
-    pk = _disk_peak(du, dv, dval, nd, a, b, c)
-    s2 = 0.0
-    for k in range(nr):
-        if routl[k] == 0:
-            e = rval[k] - (a + b * ru[k] + c * rv[k])
-            s2 += e * e
-    if not np.sqrt(s2 / cnt) <= EDGE_FIT * pk:
+    if not _ring_rms(ru, rv, rval, routl, nr, a, b, c)[0] <= EDGE_FIT * _disk_peak(du, dv, dval, nd, a, b, c):
         for k in range(nr):
             if routl[k] == 2:
                 routl[k] = 0
@@ -764,28 +771,16 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     if nout > 0 and nr - nout >= 8:
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-    sbg = 0.0
-    nbg = 0
-    for k in range(nr):
-        if not routl[k]:
-            res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
-            sbg += res * res
-            nbg += 1
-    bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
+    rms, nbg = _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc)
+    bg = rms / peak
     # the dark side of an edge (EDGE_ARCS)
     if bg > QUAD_BGRES:
         found, pa, pb, pc = _edge_plane(ru, rv, rval, routl, nr, du, dv, dval, nd, pa, pb, pc,
                                         max(ff * peak, fn * noise_i), noise_i, rabs)
         if found:
             peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-            sbg = 0.0
-            nbg = 0
-            for k in range(nr):
-                if not routl[k]:
-                    res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
-                    sbg += res * res
-                    nbg += 1
-            bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
+            rms, nbg = _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc)
+            bg = rms / peak
     # the curved background (QUAD_MIN, QUAD_BGRES), for dshape
     doq = nbg >= QUAD_MIN and bg > QUAD_BGRES
     qa = qb = qc = qd = qe = 0.0
