@@ -149,120 +149,6 @@ TEX_INSET = 4.5
 #: QUAD_BGRES of the contrast (``bgres``; below it no ok point of those sequences was
 #: more than 0.11 px off): a flat background costs nothing.
 QUAD_MIN, QUAD_BGRES = 12, 0.03
-#: A marker near the membrane's edge (or a shadow's) has the dark side of the edge in its
-#: ring: the least-squares plane tilts towards it (spreading the step into a slope, so no
-#: ring pixel stands out), and the disk's pixels on that side, above the tilted plane,
-#: pull the centre 0.3-1 px towards the edge (independent renders: markers within ~3 mm
-#: of the wing's border, flagged ``imprecise``). So where the ring fits its plane badly
-#: (``bgres`` above QUAD_BGRES), planes are also fitted without each arc of EDGE_ARCS
-#: octants (:func:`_octant`; the dark side of a straight edge is one arc). The one with
-#: the least median absolute residual over the whole ring (least median of squares:
-#: robust while the dark side is under half the ring) is taken
-#:
-#: * when it is EDGE_GAIN times better than the full plane's,
-#: * when the pixels it left out are darker than those it kept by the foreign threshold
-#:   (FOREIGN_FRACTION of the peak, FOREIGN_NOISE noise sigmas): the disk is painted on
-#:   the bright side (a steep plane through the dark side that left out a glare on the
-#:   other put a centre 1.1 px off at sigma 0.23);
-#:
-#: then refitted on the ring pixels within EDGE_INLIER robust sigmas of it (1.4826 x its
-#: median absolute residual, at least the noise), and kept
-#:
-#: * when EDGE_MIN or more pixels remain and at most EDGE_SHARE of the ring was left out:
-#:   the edge then passes beyond the marker's own blob (nearer, the blob straddles the
-#:   edge, neither background is right, and the full plane was the better guess: 0.15-0.25
-#:   px worse with the rule on a marker 2 mm from the trailing edge),
-#: * when the bright side is a plane (RMS residual at most EDGE_FIT of the peak; beyond,
-#:   at 65-90 deg views, the rule moved centres 1-4 px).
-#:
-#: The ring must hold clean pixels in all 8 octants: one already cut (by the split from
-#: a near neighbour, or by a foreign blob) leaves part of the disk without any ring pixel
-#: once an arc is left out too, and the plane's extrapolation there moved a centre 1.5
-#: px at sigma 0.22 (fresh bumped DEV seed 116 left, marker 10, frame 81; a hint taken
-#: from TEST's one confident error of this code, on `bumped`).
-#: On 7 DEV sequences' wing markers at their true positions (clean and hard seeds 3-5,
-#: black 51, clean16 6; every other frame; disks of 6 and 8 px) it mended 223 centres by
-#: more than 0.1 px and worsened none by 0.05 px.
-EDGE_ARCS, EDGE_GAIN, EDGE_INLIER, EDGE_MIN, EDGE_SHARE, EDGE_FIT = (2, 3, 4), 0.5, 3.0, 8, 0.3, 0.06
-
-
-@jit
-def _octant(u, v):
-    """The 45 deg sector (0-7, counter-clockwise from +x in image axes) of pixel offset
-    (u, v) != (0, 0), by exact comparisons (both engines must agree on the borders)."""
-    if v >= 0 and u > 0:
-        return 0 if v < u else 1
-    if u <= 0 and v > 0:
-        return 2 if v > -u else 3
-    if u < 0 and v <= 0:
-        return 4 if -v < -u else 5
-    return 6 if u < -v else 7
-
-
-@jit
-def _in_arc(u, v, s0, m):
-    """Whether pixel offset (u, v) lies in the arc of ``m`` octants from octant ``s0``."""
-    return (_octant(u, v) - s0) % 8 < m
-
-
-def _edge_arcs(grid, sizes=EDGE_ARCS):
-    """(A, K) bool: the patch pixels in each arc of ``sizes`` octants, from each octant
-    (see :data:`EDGE_ARCS`; ``sizes=(1,)``: the octants)."""
-    key = ("arcs", grid.hc, sizes)
-    arcs = _OFFSETS.get(key)
-    if arcs is None:
-        uv = [(int(u), int(v)) for u, v in zip(grid.gx, grid.gy)]
-        arcs = np.array([[bool(u or v) and _in_arc(u, v, s0, m) for u, v in uv]
-                         for m in sizes for s0 in range(8)])
-        _OFFSETS[key] = arcs
-    return arcs
-
-
-def _dark_side(patch, ring, disk, coef, res, sig, peak, noise, bgres, grid):
-    """Leave the dark side of an edge out of the background fit (see :data:`EDGE_ARCS`).
-
-    For the markers whose ring (``ring``: the pixels the plane was fitted on) departs from
-    its plane by more than QUAD_BGRES of the peak (``bgres``), refits ``coef``, ``res``,
-    ``sig`` and ``peak`` in place; returns the (n, K) bool mask of the ring pixels left out.
-    """
-    dark = np.zeros_like(ring)
-    rows = np.flatnonzero(bgres > QUAD_BGRES)
-    if not rows.size:
-        return dark
-    arcs = _edge_arcs(grid)
-    octants = _edge_arcs(grid, (1,))
-    step = np.maximum(FOREIGN_FRACTION * peak, FOREIGN_NOISE * noise)
-    for q in rows.tolist():
-        rq = ring[q]
-        if not (octants & rq).any(1).all():
-            continue  # (a ring cut by the neighbour split or a foreign blob: see EDGE_ARCS)
-        full = np.median(np.abs(res[q][rq]))
-        best, best_m = None, EDGE_GAIN * full
-        for arc in arcs:
-            keep = rq & ~arc
-            if keep.sum() < EDGE_MIN or not (rq & arc).any():
-                continue
-            if not np.mean(patch[q][rq & arc]) < np.mean(patch[q][keep]) - step[q]:
-                continue
-            c = _plane(patch[q:q + 1], keep[None], grid)[0]
-            r = patch[q] - c @ grid.basis3t
-            m = np.median(np.abs(r[rq]))
-            if m < best_m:
-                best, best_m = r, m
-        if best is None:
-            continue
-        inl = rq & (np.abs(best) <= EDGE_INLIER * max(1.4826 * best_m, float(noise[q])))
-        if inl.sum() < EDGE_MIN or (rq & ~inl).sum() > EDGE_SHARE * rq.sum():
-            continue
-        c = _plane(patch[q:q + 1], inl[None], grid)[0]
-        r = patch[q] - c @ grid.basis3t
-        pk = np.where(disk[q], r, np.float32(0.0)).max()
-        if not np.sqrt(np.mean(r[inl] ** 2)) <= EDGE_FIT * pk:
-            continue
-        dark[q] = rq & ~inl
-        coef[q], res[q], peak[q] = c, r, pk
-        sig[q] = np.where(disk[q], r, np.float32(0.0))
-    return dark
 
 
 def _contrast(sig, disk, peak, noise):
@@ -363,11 +249,6 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
     rin = ring & ~out
     with np.errstate(invalid="ignore", divide="ignore"):
         bgres = np.sqrt(np.where(rin, res * res, np.float32(0.0)).sum(1) / rin.sum(1)) / peak
-    dark = _dark_side(patch, rin, disk, coef, res, sig, peak, noise, bgres, grid)
-    if dark.any():
-        rin &= ~dark
-        with np.errstate(invalid="ignore", divide="ignore"):
-            bgres = np.sqrt(np.where(rin, res * res, np.float32(0.0)).sum(1) / rin.sum(1)) / peak
     mass = sig.sum(1)
     if wfrac > 0:
         # weights: the value above the cut, clipped at CLIP_LEVEL times the blob's median
@@ -486,17 +367,16 @@ def _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi):
 
 
 @jit
-def _ring_plane(ru, rv, rval, routl, nr, s0=0, m=0):
-    """Plane fitted to the ring pixels not marked in ``routl`` nor in the arc of ``m``
-    octants from octant ``s0`` (:func:`_in_arc`; none for m = 0), see :func:`_solve_plane`."""
-    s_0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
+def _ring_plane(ru, rv, rval, routl, nr):
+    """Plane fitted to the ring pixels not marked in ``routl`` (see :func:`_solve_plane`)."""
+    s0 = sx = sy = sxx = sxy = syy = si = sxi = syi = 0.0
     for k in range(nr):
-        if routl[k] or (m > 0 and _in_arc(ru[k], rv[k], s0, m)):
+        if routl[k]:
             continue
         u = ru[k]
         v = rv[k]
         val = rval[k]
-        s_0 += 1.0
+        s0 += 1.0
         sx += u
         sy += v
         sxx += u * u
@@ -505,7 +385,7 @@ def _ring_plane(ru, rv, rval, routl, nr, s0=0, m=0):
         si += val
         sxi += u * val
         syi += v * val
-    return _solve_plane(s_0, sx, sy, sxx, sxy, syy, si, sxi, syi)
+    return _solve_plane(s0, sx, sy, sxx, sxy, syy, si, sxi, syi)
 
 
 @jit
@@ -644,89 +524,7 @@ def _median_inplace(a, lo, n):
 
 
 @jit
-def _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc):
-    """RMS residual (NaN for none) and count of the clean ring pixels about a plane."""
-    s2 = 0.0
-    n = 0
-    for k in range(nr):
-        if routl[k] == 0:
-            e = rval[k] - (pa + pb * ru[k] + pc * rv[k])
-            s2 += e * e
-            n += 1
-    return (np.sqrt(s2 / n) if n > 0 else np.nan), n
-
-
-@jit
-def _ring_abs_median(ru, rv, rval, routl, nr, pa, pb, pc, rabs):
-    """Median absolute residual of the clean ring pixels about a plane (``rabs``: scratch)."""
-    n = 0
-    for k in range(nr):
-        if routl[k] == 0:
-            rabs[n] = abs(rval[k] - (pa + pb * ru[k] + pc * rv[k]))
-            n += 1
-    return _median_inplace(rabs, 0, n)
-
-
-@jit
-def _edge_plane(ru, rv, rval, routl, nr, du, dv, dval, nd, pa, pb, pc, step, noise_i, rabs):
-    """Compiled twin of :func:`_dark_side` for one marker: the plane (pa, pb, pc), refitted
-    without the dark side of an edge when one is found (its ring pixels marked 2 in
-    ``routl``); returns found, pa, pb, pc."""
-    seen = 0
-    for k in range(nr):
-        if routl[k] == 0:
-            seen |= 1 << _octant(ru[k], rv[k])
-    if seen != 255:
-        return False, pa, pb, pc  # (a ring cut by the neighbour split or a foreign blob)
-    best_m = EDGE_GAIN * _ring_abs_median(ru, rv, rval, routl, nr, pa, pb, pc, rabs)
-    found = False
-    ba = bb = bc = 0.0
-    for m in EDGE_ARCS:
-        for s0 in range(8):
-            cnt = narc = 0
-            skeep = sarc = 0.0
-            for k in range(nr):
-                if routl[k] == 0:
-                    if _in_arc(ru[k], rv[k], s0, m):
-                        narc += 1
-                        sarc += rval[k]
-                    else:
-                        cnt += 1
-                        skeep += rval[k]
-            if cnt < EDGE_MIN or narc == 0 or not sarc / narc < skeep / cnt - step:
-                continue
-            a, b, c = _ring_plane(ru, rv, rval, routl, nr, s0, m)
-            med = _ring_abs_median(ru, rv, rval, routl, nr, a, b, c, rabs)
-            if med < best_m:
-                best_m = med
-                ba, bb, bc = a, b, c
-                found = True
-    if not found:
-        return False, pa, pb, pc
-    lim = EDGE_INLIER * max(1.4826 * best_m, noise_i)
-    cnt = 0
-    nclean = 0
-    for k in range(nr):
-        if routl[k] == 0:
-            nclean += 1
-            if abs(rval[k] - (ba + bb * ru[k] + bc * rv[k])) <= lim:
-                cnt += 1
-    if cnt < EDGE_MIN or nclean - cnt > EDGE_SHARE * nclean:
-        return False, pa, pb, pc
-    for k in range(nr):
-        if routl[k] == 0 and abs(rval[k] - (ba + bb * ru[k] + bc * rv[k])) > lim:
-            routl[k] = 2
-    a, b, c = _ring_plane(ru, rv, rval, routl, nr)
-    if not _ring_rms(ru, rv, rval, routl, nr, a, b, c)[0] <= EDGE_FIT * _disk_peak(du, dv, dval, nd, a, b, c):
-        for k in range(nr):
-            if routl[k] == 2:
-                routl[k] = 0
-        return False, pa, pb, pc
-    return True, a, b, c
-
-
-@jit
-def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl, qm, rabs):
+def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl, qm):
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
     Returns dx, dy, mass, peak, nout (not explained by the neighbour), frac, dip, omin,
@@ -774,30 +572,28 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
                 rval[nr] = val
                 nr += 1
     for k in range(nr):
-        routl[k] = 0
+        routl[k] = False
     pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
     peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
     thr = max(ff * peak, fn * noise_i)
     nout = 0
     for k in range(nr):
         if rval[k] - (pa + pb * ru[k] + pc * rv[k]) > thr:
-            routl[k] = 1
+            routl[k] = True
             nout += 1
     if nout > 0 and nr - nout >= 8:
         pa, pb, pc = _ring_plane(ru, rv, rval, routl, nr)
         peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-    rms, nbg = _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc)
-    bg = rms / peak
-    # the dark side of an edge (EDGE_ARCS)
-    if bg > QUAD_BGRES:
-        found, pa, pb, pc = _edge_plane(ru, rv, rval, routl, nr, du, dv, dval, nd, pa, pb, pc,
-                                        max(ff * peak, fn * noise_i), noise_i, rabs)
-        if found:
-            peak = _disk_peak(du, dv, dval, nd, pa, pb, pc)
-            rms, nbg = _ring_rms(ru, rv, rval, routl, nr, pa, pb, pc)
-            bg = rms / peak
+    sbg = 0.0
+    nbg = 0
+    for k in range(nr):
+        if not routl[k]:
+            res = rval[k] - (pa + pb * ru[k] + pc * rv[k])
+            sbg += res * res
+            nbg += 1
+    bg = np.sqrt(sbg / nbg) / peak if nbg > 0 else np.nan
     # the curved background (QUAD_MIN, QUAD_BGRES), for dshape
-    doq = nbg >= QUAD_MIN and bg > QUAD_BGRES
+    doq = nr - nout >= QUAD_MIN and bg > QUAD_BGRES
     qa = qb = qc = qd = qe = 0.0
     if doq:
         qa, qb, qc, qd, qe = _ring_saddle(ru, rv, rval, routl, nr, qm)
@@ -891,7 +687,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     omin2 = np.inf
     if nout > 0:
         for k in range(nr):
-            if routl[k] == 1:
+            if routl[k]:
                 u = ru[k]
                 v = rv[k]
                 if near and not np.isnan(rr):
@@ -933,7 +729,7 @@ def _buffers(rd):
         m = 2 * (int(np.ceil(rd[i])) + 3) + 1
         cap = max(cap, m * m)
     return (np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap),
-            np.empty(cap, np.int8), np.empty((5, 7)), np.empty(cap))
+            np.empty(cap, np.bool_), np.empty((5, 7)))
 
 
 @jit
@@ -945,7 +741,7 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
     rgrow = np.empty(rd.shape[0])
     for i in range(rd.shape[0]):
         rgrow[i] = min(rmax[i], rd[i] + 3.0) if rmax[i] > rd[i] else rd[i]
-    du, dv, dval, ru, rv, rval, routl, qm, rabs = _buffers(rgrow)
+    du, dv, dval, ru, rv, rval, routl, qm = _buffers(rgrow)
     for i in range(x.shape[0]):
         xi = x[i]
         yi = y[i]
@@ -960,7 +756,7 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
             nx_ = nbx[i] - cx
             ny_ = nby[i] - cy
             res = _pass1(frame, cx, cy, r, sign[i], nx_, ny_, noise[i], nbr_r[i], wfrac, ff, fn,
-                         du, dv, dval, ru, rv, rval, routl, qm, rabs)
+                         du, dv, dval, ru, rv, rval, routl, qm)
             dx, dy, m, pk, nout, frac, dip, omin, b, vl, spread, dshape, rim, tex = res
             good = m > 0
             if good:
@@ -1051,7 +847,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
     sub = np.empty(idx.shape[0])
     for k in range(idx.shape[0]):
         sub[k] = rd[idx[k]]
-    du, dv, dval, ru, rv, rval, routl, qm, rabs = _buffers(sub)
+    du, dv, dval, ru, rv, rval, routl, qm = _buffers(sub)
     for k in range(idx.shape[0]):
         i = idx[k]
         j = jn[i]
@@ -1075,7 +871,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
         while True:
             dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx = _pass1(
                 frame, cx, cy, r, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
-                du, dv, dval, ru, rv, rval, routl, qm, rabs)
+                du, dv, dval, ru, rv, rval, routl, qm)
             good = m > 0
             if good:
                 xi = cx + dx
