@@ -187,29 +187,27 @@ class IdentityStage:
         flagged, cannot say. Only for markers that no neighbour can vouch for.
 
         A merger alone is no dispute (:meth:`_disputed` says why); a merger whose partner
-        was then lost is. So is a ``foreign`` flag (a blob no known marker explains touched
-        it) while one of its two nearest markers of the reference frame was, then, lost or
-        misplaced, and has not been ok since: the blob may have been that marker's
-        (independent renderer, black, DEV seed 57 left: marker 21 flagged foreign beside
-        marker 20, mis-tracked and then lost at a 50-65 deg view, drifted 2 px onto their
-        joined blob and resumed ok there, sigma 0.17-0.19). Independent renderer, clean16, fresh DEV seed 66 right: marker
+        was then lost is. Independent renderer, clean16, fresh DEV seed 66 right: marker
         18 shared marker 19's blob at an edge-on turn, 19 was lost, and 18 drifted over
         flagged frames onto 19's blob and resumed ok there, 8.6-15.7 px off for 14 frames
         (and misled its neighbour 17's re-acquisition onto its own blob); seed 53 left:
-        markers 9 and 10 the same, 6-8 px off."""
+        markers 9 and 10 the same, 6-8 px off.
+
+        So is a ``foreign`` flag (a blob no known marker explains touched it) while one of
+        its two nearest markers of the reference frame was, then, lost or misplaced, and
+        has not been ok since: the blob may have been that marker's (black, DEV seed 57
+        left: marker 21 flagged foreign beside marker 20, mis-tracked and then lost at a
+        50-65 deg view, drifted 2 px onto their joined blob and resumed ok there, sigma
+        0.17-0.19)."""
         out = np.zeros(idx.size, bool)
-        ref_j2 = None
         for k, i in enumerate(idx.tolist()):
             fr = _frames_since(int(self.last_ok[i]), t, res.x.shape[0])
             fr = fr[np.isin(res.reason[fr, i], (_R["merged"], _R["foreign"])) & np.isfinite(res.x[fr, i])]
             for f in fr.tolist():
                 if res.reason[f, i] == _R["foreign"]:
                     # an unexplained blob: its two nearest markers of the reference frame
-                    if ref_j2 is None:
-                        ref = self.ref_pos
-                        ref_j2 = _nearest_two(ref[:, 0], ref[:, 1], np.isfinite(ref[:, 0]))[0]
                     near = np.zeros(len(ST), bool)
-                    jj = ref_j2[i][ref_j2[i] >= 0]
+                    jj = self._ref_j2[i][self._ref_j2[i] >= 0]
                     near[jj] = ST[jj] != OK
                 else:
                     d = np.hypot(res.x[f] - res.x[f, i], res.y[f] - res.y[f, i])

@@ -254,7 +254,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         (:class:`~.templates.TemplateStage`).
     local : float
         Radius (px) of a marker's neighbourhood; ``_spacing`` (N,): distance to the
-        nearest marker there (:meth:`_set_local`).
+        nearest marker there, ``_ref_j2`` (N, 2): its two nearest markers there, -1 for
+        none (:meth:`_set_local`).
     pick_moved, sigma0 : (N,) ndarray
         The picks' frame only: the refinement moved away from the click (the click is
         kept), and the picks' sigma (:meth:`from_picks`).
@@ -413,7 +414,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
 
     def _set_local(self):
         """Radius (px) of a marker's neighbourhood: four typical neighbour spacings."""
-        _, d, _ = _nearest_two(self.ref_pos[:, 0], self.ref_pos[:, 1], np.ones(len(self.ref_pos), bool))
+        j, d, _ = _nearest_two(self.ref_pos[:, 0], self.ref_pos[:, 1], np.ones(len(self.ref_pos), bool))
+        self._ref_j2 = j
         self._spacing = np.where(np.isfinite(d[:, 0]), d[:, 0], np.inf)
         d0 = d[:, 0][np.isfinite(d[:, 0])]
         self.local = max(40.0, 4.0 * float(np.median(d0))) if d0.size else 40.0
