@@ -1,5 +1,5 @@
-"""Three latent identity failures that a tried centring change brought out (session 13's
-edge rule, docs/tracker.md item 3, not kept): it moved positions and sigmas a little and
+"""Three latent identity failures that a centring change brought out (the edge
+rule, docs/tracker.md item 3: tried in session 13, kept in 14): it moved positions and sigmas a little and
 the tracker took other paths, onto these. Each sequence had confident errors on commit
 27bfded (branch s13-edge; checked) and passes with the mends named below; session 12's code
 passed them by luck, so these guard the mends against the next change of centring."""

@@ -52,7 +52,7 @@ def clean():
 
 @pytest.fixture(scope="module")
 def hard():
-    return synth.render_flapping(n_frames=16, preset="hard", seed=2)
+    return synth.render_flapping(n_frames=24, preset="hard", seed=2)  # (right: 11 flagged points)
 
 
 @pytest.mark.parametrize("camera", ["left", "right"])
