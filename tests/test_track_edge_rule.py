@@ -1,4 +1,4 @@
-"""The dark side of the membrane's edge left out of a marker's background (refine.EDGE_ARCS),
+"""The dark side of the membrane's edge left out of a marker's background (background.EDGE_ARCS),
 with sigma kept honest by the centre's move between two cuts (refine.EDGE_CUT)."""
 import numpy as np
 import pytest
@@ -27,7 +27,7 @@ def test_the_edge_rule_centres_a_marker_beside_the_edge(edge_marker, use_numba, 
     # The full plane tilts towards the dark side and puts the centre ~0.4 px towards the
     # edge (flagged by its sigma); the edge rule finds the background and the centre, and
     # sigma stays honest
-    from wingphoto.track import engine, refine
+    from wingphoto.track import background, engine
     from wingphoto.track.options import TrackOptions
 
     if use_numba and not engine.NUMBA_AVAILABLE:
@@ -40,7 +40,7 @@ def test_the_edge_rule_centres_a_marker_beside_the_edge(edge_marker, use_numba, 
             assert err < 0.05 and err < 3 * sig and sig < TrackOptions().max_sigma
         if not use_numba:
             # without the rule (the numpy engine reads EDGE_GAIN at call time)
-            monkeypatch.setattr(refine, "EDGE_GAIN", 0.0)
+            monkeypatch.setattr(background, "EDGE_GAIN", 0.0)
             for img, c in edge_marker:
                 err, sig = _centre(img, c)
                 assert err > 0.3

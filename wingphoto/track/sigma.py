@@ -11,7 +11,7 @@ Independent terms, added in quadrature:
 * shape: the centre's sensitivity to the refiner's model (``dshape``): how far it moves
   when its weights are flattened (the pull of the blob's uneven brightness) and, added
   in quadrature, when the background under the disk follows the ring's curvature
-  instead of its plane (:data:`~.refine.QUAD_MIN`: a marker at the membrane's edge,
+  instead of its plane (:data:`~.background.QUAD_MIN`: a marker at the membrane's edge,
   whose plane tilts towards the dark side - the ~1 px confident errors at sigma
   0.2-0.25 of extra DEV seed 11), beyond the ~0.03 px a uniform marker shows;
 * texture: the inner face's brightness variation beyond the pixel noise (``tex``: painted
