@@ -15,8 +15,6 @@ import numpy as np
 
 from .engine import jit
 
-_ARCS = {}
-
 
 # --------------------------------------------------------------------------- numpy fits
 def _plane(patch, ring, grid):
@@ -46,7 +44,8 @@ def _saddle(patch, ring, grid):
     return np.linalg.solve(A, rhs[:, :, None])[:, :, 0].astype(np.float32)
 
 
-#: ``dshape`` also holds how far the centre moves when the background under the disk is
+#: The refiner's ``dshape`` (a term of sigma) holds how far the centre moves when the
+#: background under the disk is
 #: the ring's plane plus its two second-order harmonics (``x^2 - y^2`` and ``x y``: the
 #: curvature a plane cannot follow, fitted when the ring has QUAD_MIN or more clean
 #: pixels) instead of the plane alone (the two moves added in quadrature). A marker near
@@ -119,6 +118,9 @@ def _octant(u, v):
 def _in_arc(u, v, s0, m):
     """Whether pixel offset (u, v) lies in the arc of ``m`` octants from octant ``s0``."""
     return (_octant(u, v) - s0) % 8 < m
+
+
+_ARCS = {}  # (the arcs' masks per patch size)
 
 
 def _edge_arcs(grid, sizes=EDGE_ARCS):
