@@ -45,10 +45,9 @@ def _saddle(patch, ring, grid):
 
 
 #: The refiner's ``dshape`` (a term of sigma) holds how far the centre moves when the
-#: background under the disk is
-#: the ring's plane plus its two second-order harmonics (``x^2 - y^2`` and ``x y``: the
-#: curvature a plane cannot follow, fitted when the ring has QUAD_MIN or more clean
-#: pixels) instead of the plane alone (the two moves added in quadrature). A marker near
+#: background under the disk is the ring's plane plus its two second-order harmonics
+#: (``x^2 - y^2`` and ``x y``: the curvature a plane cannot follow, fitted when the ring
+#: has QUAD_MIN or more clean pixels) instead of the plane alone (the two moves added in quadrature). A marker near
 #: the membrane's edge or a shadow has a dark side in its ring: the plane tilts towards
 #: it, and the disk's pixels on that side, background above the plane, pull the centre
 #: towards the edge - by 0.6-1 px at sigma 0.2-0.25 on the independent renders (hard,
