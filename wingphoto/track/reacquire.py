@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
 from .refine import _refine
-from .relocate import STILL_PX, _moving, _was_moving
+from .relocate import STILL_PX, _moving, _roamed, _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
 
 logger = logging.getLogger(__name__)
@@ -173,11 +173,19 @@ class ReacquireStage:
         ref = self.ref_pos
         ti = int(self.hist_t[i, 0])
         Pi = self.hist_x[i, 0]
+        # its position on frame ti as written there, to be moved as its neighbours' rows
+        # there moved since (the motion model's copy Pi is moved with a measured camera bump
+        # or a dropped frame, Tracker._set_model; mixed with the neighbours' rows it put two
+        # markers of a row on their neighbours' blobs, a bump's 7.5 px off: bumped DEV seed
+        # 93 right, markers 20 and 21, with a variant of the edge rule not kept)
+        Pt = Pi
+        if 0 <= ti < T and np.isfinite(res.x[ti, i]) and np.isfinite(res.y[ti, i]):
+            Pt = np.array([res.x[ti, i], res.y[ti, i]])
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
-            c1, prev = self._neighbours_then(i, ti, Pi, okn, res, alike_only=True)
-            if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pi, prev)):
-                pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
+            c1, prev = self._neighbours_then(i, ti, Pt, okn, res, alike_only=True)
+            if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pt, prev)):
+                pq = _neighbour_prediction(Pt, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
                     logger.debug("frame %d: marker %d predicted from its neighbours then %s", t, i, c1.tolist())
                     return pq[0], p.reacquire_radius, p.reacquire_score, c1
@@ -227,7 +235,7 @@ class ReacquireStage:
         q = Pi.copy()
         if nbr.size == 1 and 0 <= ti < T and res.status[ti, nbr[0]] == OK:
             j = nbr[0]
-            q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
+            q = Pt + (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
         return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
 
     def _certain_lately(self, res, t, direction):
@@ -252,9 +260,9 @@ class ReacquireStage:
         known blobs), and if the neighbours put its last ok position there. A marker
         that was moving when last seen (:func:`~.relocate._was_moving`) is predicted and
         checked only from anchors that are not still (within 1.5 px of their reference
-        positions): the static mount and dots, ok beside a wing marker on its last ok
-        frame when its wing neighbours were not, kept the right blob refused to the end
-        of the sequence.
+        positions) and have roamed (:func:`~.relocate._roamed`): the static mount and
+        dots, ok beside a wing marker on its last ok frame when its wing neighbours were
+        not, kept the right blob refused to the end of the sequence.
         """
         p = self.p
         # the anchors: ok markers, and those flagged only for their precision
@@ -278,8 +286,14 @@ class ReacquireStage:
         # where a wing marker went (they would keep it at its last position). One that was
         # still when last seen may be a static dot or a wing marker lost at rest: every
         # anchor may speak for it (its wing neighbours tell it from a static dot).
-        moving = _was_moving(self, res)
-        anchor_away = _moving(self, X, Y, anchor)  # (anchors have positions)
+        # The anchors away from their reference positions must also have roamed
+        # (relocate.ROAM_PX): after a camera bump the tracker did not measure, the static
+        # dots are away by the bump, and they mapped a wing marker lost with its whole wing
+        # to its frame-0 position - on another marker's blob there, 29 px off (bumped DEV
+        # seed 3 right, marker 13, with a variant of the edge rule not kept).
+        roamed = _roamed(self, res)
+        moving = _was_moving(self) | roamed
+        anchor_away = _moving(self, X, Y, anchor) & roamed  # (anchors have positions)
         q = {}
         for i in lost.tolist():
             r = self._predict_lost(i, okn[anchor_away[okn]] if moving[i] else okn, X, Y, res, t)

@@ -360,10 +360,16 @@ def _was_moving(tr, res=None):
     dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1]).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         v = np.hypot(*(tr.hist_x[:, 0] - tr.hist_x[:, 1]).T) / dt
-        roamed = False if res is None else (
-            np.hypot(res.x - tr.ref_pos[:, 0], res.y - tr.ref_pos[:, 1]) >= ROAM_PX).any(0)
     fast = (tr.nh >= 2) & (dt > 0) & (v >= 0.3)
-    return away | fast | roamed
+    return away | fast | (False if res is None else _roamed(tr, res))
+
+
+def _roamed(tr, res):
+    """Markers written :data:`ROAM_PX` or more from their reference position on any frame
+    of ``res``: wing markers, never the static mount and dots (a camera's bump moves those
+    a few px)."""
+    with np.errstate(invalid="ignore"):
+        return (np.hypot(res.x - tr.ref_pos[:, 0], res.y - tr.ref_pos[:, 1]) >= ROAM_PX).any(0)
 
 
 def _moving(tr, X, Y, sel):
