@@ -121,3 +121,27 @@ def test_retracked_rows_are_audited_against_the_corrected_frame():
     assert (mine.loc[20:, "status"] == "flagged").all() and (mine.loc[20:, "reason"] == "misplaced").all()
     assert (mine.loc[11:19, "status"] == "ok").all() and mine.loc[10, "status"] == "manual"
     assert (out.loc[out.point != 5, "status"] == "ok").all()
+
+
+def test_two_markers_that_slipped_together_are_both_flagged():
+    # two markers of a row slipped by one spacing each spoil the other's map (no verdict
+    # without trimming: fresh DEV dropped seed 85 left, both ok 12-15 px off); the worst
+    # neighbour left out (AUDIT_TRIM), each is judged - and the rest stay ok
+    from wingphoto.track import engine
+    from wingphoto.track.audit import audit_against_picks
+    from wingphoto.track.status import _R, FLAGGED, OK
+
+    for numba in ((True, False) if engine.NUMBA_AVAILABLE else (False,)):
+        was = engine.use_numba()
+        engine.try_numba(numba)
+        try:
+            res, ref = _grid_run(slip=(5, 10))
+            res.x[10:, 6] += 12.0
+            n = audit_against_picks(res, ref, np.ones(len(ref), bool))
+        finally:
+            engine.try_numba(was)
+        assert n == 40
+        for i in (5, 6):
+            assert (res.status[10:, i] == FLAGGED).all() and (res.reason[10:, i] == _R["misplaced"]).all()
+        others = np.setdiff1d(np.arange(len(ref)), [5, 6])
+        assert (res.status[:, others] == OK).all() and (res.status[:10] == OK).all()
