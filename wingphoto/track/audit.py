@@ -58,9 +58,11 @@ AUDIT_RMS_FLOOR = 0.5
 #: mount, reference dots: a camera bump moves them by a few px): it is neither judged nor a
 #: judge - the wing's map, extrapolated to the hinge, put the mount 8 px from where it sat.
 AUDIT_STILL_PX = 10.0
-#: Where the neighbours' map does not fit (RMS above ``AUDIT_RMS_PX``: one of them is
-#: wrong), the neighbour furthest from the map is left out and the map refitted, up to
-#: AUDIT_TRIM times (at least ``AUDIT_MIN`` neighbours left). Two markers of a row that
+#: Where the neighbours' map gives no verdict and one of them is further from it than
+#: ``AUDIT_FRACTION`` of the marker's spacing (a neighbour on another marker's blob, not
+#: a wing that bends a little: trimming those flagged 9 correct points of our hard_stroke
+#: DEV), that neighbour is left out and the map refitted, up to AUDIT_TRIM times (more
+#: than ``AUDIT_MIN`` neighbours before each). Two markers of a row that
 #: slipped together by one spacing each spoiled the other's map, so neither was judged:
 #: both ok 12-15 px off for 7 frames (fresh DEV dropped seed 85 left, with a change of
 #: re-acquisition not kept).
@@ -112,10 +114,10 @@ def _map_of_one(p0, src, dst, use):
     return out, err, judge
 
 
-def _trim_worst(src, dst, use, pred, judge):
+def _trim_worst(src, dst, use, judge, far):
     """The neighbours ``use`` (T, k) without, on each frame whose map gave no verdict but
-    has more than ``AUDIT_MIN`` neighbours, the one furthest from their map; and those
-    frames (T,) bool."""
+    has more than ``AUDIT_MIN`` neighbours, the one furthest from their map if it is
+    further than ``far`` px; and those frames (T,) bool."""
     n = use.sum(1)
     again = ~judge & (n > AUDIT_MIN)
     if not again.any():
@@ -131,6 +133,7 @@ def _trim_worst(src, dst, use, pred, judge):
     r2 = np.where(use[t], np.sum((A @ beta - dst[t]) ** 2, axis=2), -1.0)
     use = use.copy()
     worst = np.argmax(r2, axis=1)
+    ok &= r2[np.arange(t.size), worst] > far * far
     use[t[ok], worst[ok]] = False
     again[t[~ok]] = False
     return use, again
@@ -149,8 +152,8 @@ def _misplaced_numpy(X, Y, ok, ref, nbr, spacing):
         use = ok[:, js] & np.isfinite(X[:, js])
         dst = np.stack([X[:, js], Y[:, js]], axis=2)
         pred, err, judge = _map_of_one(ref[a], ref[js], dst, use)
-        for _ in range(AUDIT_TRIM):  # (leave out the worst neighbour where the map misfits)
-            use, again = _trim_worst(ref[js], dst, use, pred, judge)
+        for _ in range(AUDIT_TRIM):  # (leave out a wrong neighbour where the map misfits)
+            use, again = _trim_worst(ref[js], dst, use, judge, AUDIT_FRACTION * spacing[a])
             if not again.any():
                 break
             p2, e2, j2 = _map_of_one(ref[a], ref[js], dst[again], use[again])
@@ -168,7 +171,8 @@ def _fit_one(X, Y, ok, ref, nbr, t, a, skip):
     ``skip``), from their normal equations summed in place, the 3 x 3 system inverted by
     its adjugate. Returns n, whether the system is solvable, whether the neighbours span
     the plane (not a line), where the map puts ``a`` (px, py), the RMS residual, ``a``'s
-    leverage and the neighbour (its slot in ``nbr[a]``) furthest from the map."""
+    leverage, the neighbour (its slot in ``nbr[a]``) furthest from the map and its
+    squared distance."""
     K = nbr.shape[1]
     n = su = sv = suu = suv = svv = 0.0
     hx0 = hx1 = hx2 = hy0 = hy1 = hy2 = sbb = 0.0
@@ -191,7 +195,7 @@ def _fit_one(X, Y, ok, ref, nbr, t, a, skip):
         hy2 += y
         sbb += x * x + y * y
     if n < 3:
-        return n, False, False, np.nan, np.nan, np.nan, np.nan, -1
+        return n, False, False, np.nan, np.nan, np.nan, np.nan, -1, 0.0
     mu, mv = su / n, sv / n
     cuu, cuv, cvv = suu / n - mu * mu, suv / n - mu * mv, svv / n - mv * mv
     tr = cuu + cvv
@@ -205,7 +209,7 @@ def _fit_one(X, Y, ok, ref, nbr, t, a, skip):
     c22 = suu * svv - suv * suv
     det = suu * c00 + suv * c01 + su * c02
     if det == 0.0:
-        return n, False, spans, np.nan, np.nan, np.nan, np.nan, -1
+        return n, False, spans, np.nan, np.nan, np.nan, np.nan, -1, 0.0
     i00, i01, i02, i11, i12, i22 = c00 / det, c01 / det, c02 / det, c11 / det, c12 / det, c22 / det
     bx0 = i00 * hx0 + i01 * hx1 + i02 * hx2
     bx1 = i01 * hx0 + i11 * hx1 + i12 * hx2
@@ -232,7 +236,7 @@ def _fit_one(X, Y, ok, ref, nbr, t, a, skip):
             wr = ex * ex + ey * ey
             worst = q
     return (n, True, spans, bx0 * p0 + bx1 * p1 + bx2, by0 * p0 + by1 * p1 + by2, rms,
-            np.sqrt(max(lev2, 0.0)), worst)
+            np.sqrt(max(lev2, 0.0)), worst, wr)
 
 
 @jit
@@ -250,12 +254,13 @@ def _misplaced_kernel(X, Y, ok, ref, nbr, spacing, bad):
                 continue
             skip[:] = False
             for it in range(AUDIT_TRIM + 1):
-                n, solved, spans, px, py, rms, lev, worst = _fit_one(X, Y, ok, ref, nbr, t, a, skip)
+                n, solved, spans, px, py, rms, lev, worst, wr = _fit_one(X, Y, ok, ref, nbr, t, a, skip)
                 if n >= AUDIT_MIN and solved and spans and rms <= AUDIT_RMS_PX and lev <= AUDIT_LEVERAGE:
                     lim = max(AUDIT_FRACTION * spacing[a], AUDIT_SLACK_PX + 3.0 * max(rms, AUDIT_RMS_FLOOR) * lev)
                     bad[t, a] = np.hypot(X[t, a] - px, Y[t, a] - py) > lim
                     break
-                if not (solved and n > AUDIT_MIN):
+                far = AUDIT_FRACTION * spacing[a]
+                if not (solved and n > AUDIT_MIN and wr > far * far):
                     break
                 skip[worst] = True
 
