@@ -62,10 +62,9 @@ AUDIT_STILL_PX = 10.0
 #: ``AUDIT_FRACTION`` of the marker's spacing (a neighbour on another marker's blob, not
 #: a wing that bends a little: trimming those flagged 9 correct points of our hard_stroke
 #: DEV), that neighbour is left out and the map refitted, up to AUDIT_TRIM times (more
-#: than ``AUDIT_MIN`` neighbours before each). Two markers of a row that
-#: slipped together by one spacing each spoiled the other's map, so neither was judged:
-#: both ok 12-15 px off for 7 frames (fresh DEV dropped seed 85 left, with a change of
-#: re-acquisition not kept).
+#: than ``AUDIT_MIN`` neighbours before each). Two markers of a row that slipped together
+#: by one spacing each spoiled the other's map, so neither was judged: both ok 12-15 px
+#: off for 7 frames (fresh DEV dropped seed 85 left, after a change of re-acquisition).
 AUDIT_TRIM = 2
 
 

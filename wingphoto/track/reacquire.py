@@ -173,11 +173,19 @@ class ReacquireStage:
         ref = self.ref_pos
         ti = int(self.hist_t[i, 0])
         Pi = self.hist_x[i, 0]
+        # its position on frame ti as written there, to be moved as its neighbours' rows
+        # there moved since (the motion model's copy Pi is moved with a measured camera bump
+        # or a dropped frame, Tracker._set_model; mixed with the neighbours' rows it put two
+        # markers of a row a bump's 7.5 px off, on their neighbours' blobs: bumped DEV seed
+        # 93 right, markers 20 and 21, under a looser edge rule not kept)
+        Pt = Pi
+        if 0 <= ti < T and np.isfinite(res.x[ti, i]) and np.isfinite(res.y[ti, i]):
+            Pt = np.array([res.x[ti, i], res.y[ti, i]])
         cand = okn[okn != i]
         if 0 <= ti < T and cand.size:
-            c1, prev = self._neighbours_then(i, ti, Pi, okn, res, alike_only=True)
-            if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pi, prev)):
-                pq = _neighbour_prediction(Pi, prev, np.column_stack([X[c1], Y[c1]]))
+            c1, prev = self._neighbours_then(i, ti, Pt, okn, res, alike_only=True)
+            if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pt, prev)):
+                pq = _neighbour_prediction(Pt, prev, np.column_stack([X[c1], Y[c1]]))
                 if pq is not None:
                     logger.debug("frame %d: marker %d predicted from its neighbours then %s", t, i, c1.tolist())
                     return pq[0], p.reacquire_radius, p.reacquire_score, c1
@@ -227,7 +235,7 @@ class ReacquireStage:
         q = Pi.copy()
         if nbr.size == 1 and 0 <= ti < T and res.status[ti, nbr[0]] == OK:
             j = nbr[0]
-            q += (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
+            q = Pt + (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
         return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
 
     def _certain_lately(self, res, t, direction):
