@@ -355,10 +355,12 @@ class IdentityStage:
             cand, prev = self._neighbours_then(i, ti, Pi, okn, res)
             if cand.size < min_m:
                 continue
-            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m)
+            pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m, reach=True)
             if pq is None:
                 continue  # the neighbours do not move together: nothing to compare with
             q, lim = pq
+            if lim > ASTRAY_FRACTION * self._spacing[i]:
+                continue  # they cannot tell its blob from a neighbour's: no verdict
             if math.hypot(X[i] - q[0], Y[i] - q[1]) > max(lim, min_lim):
                 bad.append(i)
             else:
