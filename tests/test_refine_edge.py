@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from wingphoto.track import background, engine
+from wingphoto.track import background, engine, refine
 from wingphoto.track.refine import refine_centroids
 
 ENGINES = [pytest.param(True, id="numba"), pytest.param(False, id="numpy")]
@@ -53,6 +53,7 @@ def test_without_the_edge_rule_the_centre_is_pulled_towards_the_edge(monkeypatch
     truth = np.array([20.3, 19.6])
     img = _marker(truth, edge=truth[1] + 6.5)
     monkeypatch.setattr(background, "EDGE_GAIN", 0.0)  # no candidate arc can win
+    monkeypatch.setattr(refine, "INNER_BGRES", np.inf)  # (nor the inner disk: test_refine_inner.py)
     xy = _refine(img, np.rint(truth), 7.0, False)
     assert xy[1] - truth[1] > 0.15
 
