@@ -135,6 +135,15 @@ EDGE_CUT, EDGE_CUT_GAIN = 0.5, 1.5
 #: 99.8 -> 99.9 %; our own hard_stroke, motion_blur and painted_markers: the inner disk
 #: is taken for < 1 % of points (their blobs fill the disk), nothing changes.
 INNER_BGRES, INNER_SHRINK, INNER_RIM = 0.05, 1.5, 0.03
+#: A second blob in the disk: a local maximum of the background-subtracted disk more than
+#: SECOND_MIN px from the centre, above SECOND_PEAK of the peak, with a dark gap (below
+#: SECOND_DIP of its value, as ``_MERGE_VALLEY``) half-way to the centre. Another marker's
+#: blob that no pixel split took off (its marker mis-tracked, so the split was made against
+#: another blob): the point is ``foreign``. The ring's outliers miss it when it lies inside
+#: the disk (independent renderer, clean, extra DEV seed 5 right, frame 70: marker 25 held
+#: part of marker 9's blob, 7 px away at a 66 deg view, ok 1.0 px off). A saturated or
+#: elongated blob has no such gap, a painted texture no gap this deep.
+SECOND_MIN, SECOND_PEAK, SECOND_DIP = 2.0, 0.5, 0.5
 
 
 def _contrast(sig, disk, peak, noise):
@@ -325,6 +334,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         dip[hit] = np.hypot(ux, uy) / nout[hit]
         frac[hit] = nout[hit] / np.maximum(ring[hit].sum(1), 1)
         omin[hit] = np.sqrt(np.where(o, d2, np.inf).min(1))
+    second = _second_blob(res, disk, peak, fx, fy, grid)
     # the valley between this blob and its neighbour: the largest value on the segment
     # between them at 40, 50 and 60 % of the way (a gap between two blobs is dark)
     valley = np.full(n, np.nan)
@@ -339,7 +349,77 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
             vals.append(sign[w] * img - (coef[w, 0] + coef[w, 1] * u + coef[w, 2] * v))
         valley[w] = np.min(vals, axis=0) / peak[w]
     return dict(d=d, mass=mass, peak=peak, nout=nout, frac=frac, dip=dip, omin=omin, bgres=bgres, valley=valley,
-                spread=spread, dshape=dshape, rim=rim, tex=tex)
+                spread=spread, dshape=dshape, rim=rim, tex=tex, second=second)
+
+
+def _second_blob(res, disk, peak, fx, fy, grid):
+    """Whether each disk holds a second blob (:data:`SECOND_MIN`), from the (n, K)
+    background-subtracted patches ``res``, the disk masks (after the pixel split), the
+    peaks and the centroid offsets ``fx, fy`` ((n, 1)). numpy twin of
+    :func:`_second_blob_kernel`."""
+    n, K = res.shape
+    hc = grid.hc
+    side = 2 * hc + 1
+    img = res.reshape(n, side, side)
+    # (a local maximum among the disk's own pixels: the other blob's top may lie beyond
+    # the disk or the split, its flank inside)
+    pad = np.pad(np.where(disk.reshape(n, side, side), img, -np.inf), ((0, 0), (1, 1), (1, 1)),
+                 constant_values=-np.inf)
+    top = np.full(img.shape, True)
+    for a in (-1, 0, 1):
+        for b in (-1, 0, 1):
+            if a or b:
+                top &= img >= pad[:, 1 + b: 1 + b + side, 1 + a: 1 + a + side]
+    ex = grid.gx[None, :] - fx
+    ey = grid.gy[None, :] - fy
+    with np.errstate(invalid="ignore"):
+        cand = disk & top.reshape(n, K) & (res > SECOND_PEAK * peak[:, None]) & (ex * ex + ey * ey > SECOND_MIN ** 2)
+    out = np.zeros(n, bool)
+    for q, k in zip(*np.nonzero(cand)):
+        if out[q]:
+            continue
+        mu = int(np.rint(0.5 * (float(grid.gx[k]) + float(fx[q, 0]))))
+        mv = int(np.rint(0.5 * (float(grid.gy[k]) + float(fy[q, 0]))))
+        out[q] = res[q, (mv + hc) * side + mu + hc] < SECOND_DIP * res[q, k]
+    return out
+
+
+@jit
+def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy, peak, r2, near, nx_, ny_, half):
+    """Compiled twin of :func:`_second_blob` for one disk (``du, dv, dval``: its pixels'
+    offsets and raw values times the polarity ``sg``; plane ``pa + pb u + pc v``; the disk:
+    ``u^2 + v^2 <= r2`` and, ``near`` a neighbour at ``nx_, ny_``, ``nx_ u + ny_ v < half``)."""
+    H, W = frame.shape
+    for k in range(nd):
+        u = du[k]
+        v = dv[k]
+        val = dval[k] - (pa + pb * u + pc * v)
+        ex = u - dx
+        ey = v - dy
+        if not (val > SECOND_PEAK * peak and ex * ex + ey * ey > SECOND_MIN * SECOND_MIN):
+            continue
+        top = True
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                if a == 0 and b == 0:
+                    continue
+                ua = u + a
+                vb = v + b
+                if ua * ua + vb * vb > r2 or (near and not (nx_ * ua + ny_ * vb < half)):
+                    continue  # (not a pixel of the disk)
+                yy = min(max(cy + int(v) + b, 0), H - 1)
+                xx = min(max(cx + int(u) + a, 0), W - 1)
+                if sg * np.float64(frame[yy, xx]) - (pa + pb * (u + a) + pc * (v + b)) > val:
+                    top = False
+        if not top:
+            continue
+        mu = int(np.rint(0.5 * (u + dx)))
+        mv = int(np.rint(0.5 * (v + dy)))
+        yy = min(max(cy + mv, 0), H - 1)
+        xx = min(max(cx + mu, 0), W - 1)
+        if sg * np.float64(frame[yy, xx]) - (pa + pb * mu + pc * mv) < SECOND_DIP * val:
+            return True
+    return False
 
 
 
@@ -365,7 +445,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
     Returns dx, dy, mass, peak, nout (not explained by the neighbour), frac, dip, omin,
-    bgres, valley, spread, dshape, rim, tex."""
+    bgres, valley, spread, dshape, rim, tex, second (:func:`_second_blob_kernel`)."""
     H, W = frame.shape
     hc = int(np.ceil(r)) + 3
     near = not np.isnan(nx_)
@@ -572,7 +652,9 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     frac = nexp / max(nr, 1) if nexp > 0 else 0.0
     dip = np.hypot(ux, uy) / nexp if nexp > 0 else 0.0
     omin = np.sqrt(omin2) if nexp > 0 else np.inf
-    return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley, spread, dshape, rim, tex
+    second = _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, fx, fy, peak, r2, near, nx_, ny_,
+                                 half)
+    return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley, spread, dshape, rim, tex, second
 
 
 @jit
@@ -610,7 +692,7 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
             ny_ = nby[i] - cy
             res = _pass1(frame, cx, cy, r, sign[i], nx_, ny_, noise[i], nbr_r[i], wfrac, ff, fn,
                          du, dv, dval, ru, rv, rval, routl, qm, rabs)
-            dx, dy, m, pk, nout, frac, dip, omin, b, vl, spread, dshape, rim, tex = res
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl, spread, dshape, rim, tex, second = res
             good = m > 0
             if good:
                 xi = cx + dx
@@ -621,7 +703,7 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
             valley = vl
             spill = nout > 0 and (frac > 0.4 or dip < 0.5)
             spill = spill and r + 1.5 <= rmax[i] and grow > 0
-            foreign = nout > 0 and (not spill) and omin <= r + 1.0
+            foreign = (nout > 0 and (not spill) and omin <= r + 1.0) or second
             it += 1
             kx = min(max(int(np.rint(xi)), 0), W - 1)
             ky = min(max(int(np.rint(yi)), 0), H - 1)
@@ -722,7 +804,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
         cy = min(max(int(np.rint(yi)), 0), H - 1)
         it = 0
         while True:
-            dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx = _pass1(
+            dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx, sec = _pass1(
                 frame, cx, cy, r, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
                 du, dv, dval, ru, rv, rval, routl, qm, rabs)
             good = m > 0
@@ -737,7 +819,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
             dshape[i] = dsh
             rim[i] = rm
             tex[i] = tx
-            foreign[i] = nout > 0 and omin <= r + 1.0
+            foreign[i] = (nout > 0 and omin <= r + 1.0) or sec
             it += 1
             kx = min(max(int(np.rint(xi)), 0), W - 1)
             ky = min(max(int(np.rint(yi)), 0), H - 1)
@@ -751,7 +833,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
             cx = min(max(int(np.rint(xi)), 0), W - 1)
             cy = min(max(int(np.rint(yi)), 0), H - 1)
             for it in range(iterations):
-                dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx = _pass1(
+                dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx, sec = _pass1(
                     frame, cx, cy, r - INNER_SHRINK, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
                     du, dv, dval, ru, rv, rval, routl, qm, rabs)
                 if not m > 0:
@@ -856,7 +938,7 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
         # disk grows, and if the ring is still not clean something else is there
         spill = (r["nout"] > 0) & ((r["frac"] > 0.4) | (r["dip"] < 0.5))
         spill &= (rd[todo] + 1.5 <= rmax[todo]) & (grow[todo] > 0)
-        foreign[todo] = (r["nout"] > 0) & ~spill & (r["omin"] <= rd[todo] + 1.0)
+        foreign[todo] = ((r["nout"] > 0) & ~spill & (r["omin"] <= rd[todo] + 1.0)) | r["second"]
         it += 1
         kx = np.clip(np.rint(nx).astype(np.int64), 0, W - 1)
         ky = np.clip(np.rint(ny).astype(np.int64), 0, H - 1)
