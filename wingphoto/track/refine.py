@@ -137,13 +137,17 @@ EDGE_CUT, EDGE_CUT_GAIN = 0.5, 1.5
 INNER_BGRES, INNER_SHRINK, INNER_RIM = 0.05, 1.5, 0.03
 #: A second blob in the disk: a local maximum of the background-subtracted disk more than
 #: SECOND_MIN px from the centre, above SECOND_PEAK of the peak, with a dark gap (below
-#: SECOND_DIP of its value, as ``_MERGE_VALLEY``) half-way to the centre. Another marker's
+#: SECOND_DIP of its value, as ``_MERGE_VALLEY``) half-way to the centre; both above the
+#: noise as a ring outlier (FOREIGN_NOISE sigmas). Another marker's
 #: blob that no pixel split took off (its marker mis-tracked, so the split was made against
 #: another blob): the point is ``foreign``. The ring's outliers miss it when it lies inside
 #: the disk (independent renderer, clean, extra DEV seed 5 right, frame 70: marker 25 held
 #: part of marker 9's blob, 7 px away at a 66 deg view, ok 1.0 px off). A saturated or
 #: elongated blob has no such gap, a painted texture no gap this deep.
 SECOND_MIN, SECOND_PEAK, SECOND_DIP = 2.0, 0.5, 0.5
+#: ... and at least SECOND_WIDE of its 8 neighbours above half its value: a blob, not a
+#: hot pixel (faint_markers DEV: impulse noise 7 px from a faint marker flagged it foreign).
+SECOND_WIDE = 2
 
 
 def _contrast(sig, disk, peak, noise):
@@ -334,7 +338,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         dip[hit] = np.hypot(ux, uy) / nout[hit]
         frac[hit] = nout[hit] / np.maximum(ring[hit].sum(1), 1)
         omin[hit] = np.sqrt(np.where(o, d2, np.inf).min(1))
-    second = _second_blob(res, disk, peak, fx, fy, grid)
+    second = _second_blob(res, disk, peak, noise, fx, fy, grid)
     # the valley between this blob and its neighbour: the largest value on the segment
     # between them at 40, 50 and 60 % of the way (a gap between two blobs is dark)
     valley = np.full(n, np.nan)
@@ -352,10 +356,10 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
                 spread=spread, dshape=dshape, rim=rim, tex=tex, second=second)
 
 
-def _second_blob(res, disk, peak, fx, fy, grid):
+def _second_blob(res, disk, peak, noise, fx, fy, grid):
     """Whether each disk holds a second blob (:data:`SECOND_MIN`), from the (n, K)
     background-subtracted patches ``res``, the disk masks (after the pixel split), the
-    peaks and the centroid offsets ``fx, fy`` ((n, 1)). numpy twin of
+    peaks, the noise and the centroid offsets ``fx, fy`` ((n, 1)). numpy twin of
     :func:`_second_blob_kernel`."""
     n, K = res.shape
     hc = grid.hc
@@ -365,27 +369,34 @@ def _second_blob(res, disk, peak, fx, fy, grid):
     # the disk or the split, its flank inside)
     pad = np.pad(np.where(disk.reshape(n, side, side), img, -np.inf), ((0, 0), (1, 1), (1, 1)),
                  constant_values=-np.inf)
+    full = np.pad(img, ((0, 0), (1, 1), (1, 1)), constant_values=-np.inf)
     top = np.full(img.shape, True)
+    wide = np.zeros(img.shape, np.int64)  # (neighbours above half its value: a blob, not a hot pixel)
     for a in (-1, 0, 1):
         for b in (-1, 0, 1):
             if a or b:
                 top &= img >= pad[:, 1 + b: 1 + b + side, 1 + a: 1 + a + side]
+                wide += full[:, 1 + b: 1 + b + side, 1 + a: 1 + a + side] > 0.5 * img
     ex = grid.gx[None, :] - fx
     ey = grid.gy[None, :] - fy
     with np.errstate(invalid="ignore"):
-        cand = disk & top.reshape(n, K) & (res > SECOND_PEAK * peak[:, None]) & (ex * ex + ey * ey > SECOND_MIN ** 2)
+        lo = np.maximum(SECOND_PEAK * peak, FOREIGN_NOISE * np.asarray(noise, np.float64))
+        cand = (disk & top.reshape(n, K) & (wide.reshape(n, K) >= SECOND_WIDE) & (res > lo[:, None])
+                & (ex * ex + ey * ey > SECOND_MIN ** 2))
     out = np.zeros(n, bool)
     for q, k in zip(*np.nonzero(cand)):
         if out[q]:
             continue
         mu = int(np.rint(0.5 * (float(grid.gx[k]) + float(fx[q, 0]))))
         mv = int(np.rint(0.5 * (float(grid.gy[k]) + float(fy[q, 0]))))
-        out[q] = res[q, (mv + hc) * side + mu + hc] < SECOND_DIP * res[q, k]
+        mid = res[q, (mv + hc) * side + mu + hc]
+        out[q] = mid < SECOND_DIP * res[q, k] and res[q, k] - mid > FOREIGN_NOISE * noise[q]
     return out
 
 
 @jit
-def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy, peak, r2, near, nx_, ny_, half):
+def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy, peak, noise_i, r2, near, nx_, ny_,
+                        half):
     """Compiled twin of :func:`_second_blob` for one disk (``du, dv, dval``: its pixels'
     offsets and raw values times the polarity ``sg``; plane ``pa + pb u + pc v``; the disk:
     ``u^2 + v^2 <= r2`` and, ``near`` a neighbour at ``nx_, ny_``, ``nx_ u + ny_ v < half``)."""
@@ -396,28 +407,33 @@ def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy,
         val = dval[k] - (pa + pb * u + pc * v)
         ex = u - dx
         ey = v - dy
-        if not (val > SECOND_PEAK * peak and ex * ex + ey * ey > SECOND_MIN * SECOND_MIN):
+        if not (val > max(SECOND_PEAK * peak, FOREIGN_NOISE * noise_i) and ex * ex + ey * ey > SECOND_MIN * SECOND_MIN):
             continue
         top = True
+        wide = 0
         for a in range(-1, 2):
             for b in range(-1, 2):
                 if a == 0 and b == 0:
                     continue
                 ua = u + a
                 vb = v + b
-                if ua * ua + vb * vb > r2 or (near and not (nx_ * ua + ny_ * vb < half)):
-                    continue  # (not a pixel of the disk)
                 yy = min(max(cy + int(v) + b, 0), H - 1)
                 xx = min(max(cx + int(u) + a, 0), W - 1)
-                if sg * np.float64(frame[yy, xx]) - (pa + pb * (u + a) + pc * (v + b)) > val:
+                rab = sg * np.float64(frame[yy, xx]) - (pa + pb * ua + pc * vb)
+                if rab > 0.5 * val:
+                    wide += 1
+                if ua * ua + vb * vb > r2 or (near and not (nx_ * ua + ny_ * vb < half)):
+                    continue  # (not a pixel of the disk)
+                if rab > val:
                     top = False
-        if not top:
+        if not (top and wide >= SECOND_WIDE):
             continue
         mu = int(np.rint(0.5 * (u + dx)))
         mv = int(np.rint(0.5 * (v + dy)))
         yy = min(max(cy + mv, 0), H - 1)
         xx = min(max(cx + mu, 0), W - 1)
-        if sg * np.float64(frame[yy, xx]) - (pa + pb * mu + pc * mv) < SECOND_DIP * val:
+        mid = sg * np.float64(frame[yy, xx]) - (pa + pb * mu + pc * mv)
+        if mid < SECOND_DIP * val and val - mid > FOREIGN_NOISE * noise_i:
             return True
     return False
 
@@ -652,8 +668,8 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     frac = nexp / max(nr, 1) if nexp > 0 else 0.0
     dip = np.hypot(ux, uy) / nexp if nexp > 0 else 0.0
     omin = np.sqrt(omin2) if nexp > 0 else np.inf
-    second = _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, fx, fy, peak, r2, near, nx_, ny_,
-                                 half)
+    second = _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, fx, fy, peak, noise_i, r2, near,
+                                 nx_, ny_, half)
     return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley, spread, dshape, rim, tex, second
 
 
