@@ -148,6 +148,10 @@ SECOND_MIN, SECOND_PEAK, SECOND_DIP = 2.0, 0.5, 0.5
 #: ... and at least SECOND_WIDE of its 8 neighbours above half its value: a blob, not a
 #: hot pixel (faint_markers DEV: impulse noise 7 px from a faint marker flagged it foreign).
 SECOND_WIDE = 2
+#: ... and not on the split neighbour's own blob, whose tail crosses the split: within its
+#: disk radius + 0.5 (the ``nbr_r`` of the ring's outliers) less SECOND_EXPLAINED px (its
+#: blob radius + 1.5 px; converging discs 7-8 px apart were flagged at the split).
+SECOND_EXPLAINED = 2.0
 
 
 def _contrast(sig, disk, peak, noise):
@@ -338,7 +342,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         dip[hit] = np.hypot(ux, uy) / nout[hit]
         frac[hit] = nout[hit] / np.maximum(ring[hit].sum(1), 1)
         omin[hit] = np.sqrt(np.where(o, d2, np.inf).min(1))
-    second = _second_blob(res, disk, peak, noise, fx, fy, grid)
+    second = _second_blob(res, disk, peak, noise, fx, fy, grid, nb, nbr_r)
     # the valley between this blob and its neighbour: the largest value on the segment
     # between them at 40, 50 and 60 % of the way (a gap between two blobs is dark)
     valley = np.full(n, np.nan)
@@ -356,10 +360,12 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
                 spread=spread, dshape=dshape, rim=rim, tex=tex, second=second)
 
 
-def _second_blob(res, disk, peak, noise, fx, fy, grid):
+def _second_blob(res, disk, peak, noise, fx, fy, grid, nb=None, nbr_r=None):
     """Whether each disk holds a second blob (:data:`SECOND_MIN`), from the (n, K)
     background-subtracted patches ``res``, the disk masks (after the pixel split), the
-    peaks, the noise and the centroid offsets ``fx, fy`` ((n, 1)). numpy twin of
+    peaks, the noise and the centroid offsets ``fx, fy`` ((n, 1)); not within the split
+    neighbour's blob (``nb`` its offset, ``nbr_r`` its disk radius + 0.5: its blob reaches
+    SECOND_EXPLAINED less, its tail crosses the split). numpy twin of
     :func:`_second_blob_kernel`."""
     n, K = res.shape
     hc = grid.hc
@@ -383,6 +389,11 @@ def _second_blob(res, disk, peak, noise, fx, fy, grid):
         lo = np.maximum(SECOND_PEAK * peak, FOREIGN_NOISE * np.asarray(noise, np.float64))
         cand = (disk & top.reshape(n, K) & (wide.reshape(n, K) >= SECOND_WIDE) & (res > lo[:, None])
                 & (ex * ex + ey * ey > SECOND_MIN ** 2))
+        if nb is not None and nbr_r is not None:
+            own = np.asarray(nbr_r, np.float64) - SECOND_EXPLAINED
+            qx = grid.gx[None, :] - nb[:, 0:1]
+            qy = grid.gy[None, :] - nb[:, 1:2]
+            cand &= ~(qx * qx + qy * qy <= (own * own)[:, None])  # (NaN: no neighbour, nothing explained)
     out = np.zeros(n, bool)
     for q, k in zip(*np.nonzero(cand)):
         if out[q]:
@@ -396,7 +407,7 @@ def _second_blob(res, disk, peak, noise, fx, fy, grid):
 
 @jit
 def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy, peak, noise_i, r2, near, nx_, ny_,
-                        half):
+                        half, rr):
     """Compiled twin of :func:`_second_blob` for one disk (``du, dv, dval``: its pixels'
     offsets and raw values times the polarity ``sg``; plane ``pa + pb u + pc v``; the disk:
     ``u^2 + v^2 <= r2`` and, ``near`` a neighbour at ``nx_, ny_``, ``nx_ u + ny_ v < half``)."""
@@ -409,6 +420,10 @@ def _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, dx, dy,
         ey = v - dy
         if not (val > max(SECOND_PEAK * peak, FOREIGN_NOISE * noise_i) and ex * ex + ey * ey > SECOND_MIN * SECOND_MIN):
             continue
+        if near and not np.isnan(rr):
+            own = rr - SECOND_EXPLAINED
+            if (u - nx_) * (u - nx_) + (v - ny_) * (v - ny_) <= own * own:
+                continue  # (the split neighbour's own blob, its tail across the split)
         top = True
         wide = 0
         for a in range(-1, 2):
@@ -669,7 +684,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     dip = np.hypot(ux, uy) / nexp if nexp > 0 else 0.0
     omin = np.sqrt(omin2) if nexp > 0 else np.inf
     second = _second_blob_kernel(frame, cx, cy, sg, pa, pb, pc, du, dv, dval, nd, fx, fy, peak, noise_i, r2, near,
-                                 nx_, ny_, half)
+                                 nx_, ny_, half, rr)
     return dx, dy, mass, peak, nexp, frac, dip, omin, bg, valley, spread, dshape, rim, tex, second
 
 
