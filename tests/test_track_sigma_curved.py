@@ -27,7 +27,7 @@ def _edge_pair(edge_px, step, rng, r=4.0, gap=9.5, blur=1.2, angle=0.6):
 
 
 @pytest.mark.parametrize("use_numba", [True, False])
-def test_sigma_says_when_the_membrane_edge_bends_the_background(use_numba):
+def test_sigma_says_when_the_membrane_edge_bends_the_background(use_numba, monkeypatch):
     # The mechanism of ~1 px confident errors on the independent renders (extra DEV seed
     # 11, a marker next to the wing's edge, its neighbour split off): the ring's plane
     # tilts towards the dark side and the disk's pixels there, background above the
@@ -38,6 +38,10 @@ def test_sigma_says_when_the_membrane_edge_bends_the_background(use_numba):
     from wingphoto.track import engine, refine
     from wingphoto.track.options import TrackOptions
     from wingphoto.track.sigma import sigma_of
+
+    # the full disk's terms (the inner disk, refine.INNER_BGRES, read at call time by
+    # both engines here, measures such a marker again: below)
+    monkeypatch.setattr(refine, "INNER_BGRES", np.inf)
 
     if use_numba and not engine.NUMBA_AVAILABLE:
         pytest.skip("numba not installed")
@@ -60,5 +64,37 @@ def test_sigma_says_when_the_membrane_edge_bends_the_background(use_numba):
                 else:
                     # a flat membrane: the centre is right, and the curvature does not move it
                     assert err < 0.1 and info["dshape"][0] < 0.05
+    finally:
+        engine.try_numba(was)
+
+
+@pytest.mark.parametrize("use_numba", [True, False])
+def test_the_inner_disk_comes_nearer_and_stays_honest(use_numba):
+    # the same markers with the inner disk (session 15): its ring is nearer the blob and
+    # further from the edge; the centre comes nearer, and sigma still covers the error
+    from wingphoto.track import engine, refine
+    from wingphoto.track.sigma import sigma_of
+
+    if use_numba and not engine.NUMBA_AVAILABLE:
+        pytest.skip("numba not installed")
+    was = engine.use_numba()
+    engine.try_numba(use_numba)
+    try:
+        for seed in range(2):
+            for edge_px in (6.0, 8.0):
+                img, c, c2 = _edge_pair(edge_px, 90.0, np.random.default_rng(seed))
+                out = []
+                for inner in (refine.INNER_BGRES, np.inf):
+                    was_inner, refine.INNER_BGRES = refine.INNER_BGRES, inner
+                    try:
+                        x, y, _, info = refine._refine(img, np.array([c[0] + 0.4]), np.array([c[1] - 0.3]),
+                                                       np.array([7.0]), np.array([1.0]), np.array([1.0]),
+                                                       nbr_xy=c2[None], nbr_r=np.array([7.5]))
+                    finally:
+                        refine.INNER_BGRES = was_inner
+                    out.append((float(np.hypot(x[0] - c[0], y[0] - c[1])),
+                                float(sigma_of(np.array([1.0]), info, 1.0, np.array([4.0]))[0])))
+                (err, sig), (err_full, _) = out
+                assert err < err_full - 0.05 and err < 2.5 * sig
     finally:
         engine.try_numba(was)
