@@ -75,3 +75,15 @@ def test_repeated_frame_that_delays_the_rest_is_no_hop():
     p[7:] = p[6:-1].copy()  # frame 7 repeats frame 6 and the motion resumes a frame late
     res = _rows([p])
     assert not IdentityStage._hopped(_stage([3]), np.array([0]), res, 10).any()
+
+
+def test_a_hop_on_the_resuming_frame_itself():
+    # last ok at 8, flagged at 9, resuming at 10 with a step of a spacing: the step onto
+    # this frame's position is part of the path (hard DEV seed 65 left: ok 9.5 px off)
+    p = _path()
+    res = _rows([p])
+    now = (np.array([p[10, 0] + 6.0]), np.array([p[10, 1] - 8.0]))
+    assert not IdentityStage._hopped(_stage([8]), np.array([0]), res, 10).any()  # (two positions: not judged)
+    assert IdentityStage._hopped(_stage([8]), np.array([0]), res, 10, now=now).tolist() == [True]
+    smooth = (np.array([p[10, 0]]), np.array([p[10, 1]]))
+    assert not IdentityStage._hopped(_stage([8]), np.array([0]), res, 10, now=smooth).any()
