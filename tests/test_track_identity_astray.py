@@ -238,7 +238,7 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
     tr = SimpleNamespace(p=TrackOptions(), last_ok=np.full(n, t - 3), nh=np.array([3, 2]),
                          resid_rms=np.full(n, 0.5), _spacing=np.full(n, 15.0),
                          _inconsistent=lambda *a, **k: (empty, empty),
-                         _hopped=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _hopped=lambda idx, res, t, now=None: np.zeros(idx.size, bool),
                          _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
                          _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
                          _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
