@@ -140,7 +140,7 @@ class ReacquireStage:
         sel = np.array([i])
         return _refine(frame, [mx], [my], self.rd[sel], self.sign[sel], self.noise[sel], nb, 2, rmax=self.rd[sel])
 
-    def _predict_lost(self, i, okn, X, Y, res, t):
+    def _predict_lost(self, i, okn, X, Y, res, t, moving):
         """Where lost marker ``i`` should be now, from its neighbours.
 
         Returns (prediction, search radius, minimum score, neighbours used) or None.
@@ -164,6 +164,10 @@ class ReacquireStage:
            (``search_radius``) at its last position, moved like its one neighbour if it has
            one, and accepted only with a score of at least ``max(reacquire_score, 0.9)``.
 
+        ``moving`` (bool, all markers) says which were moving when last seen
+        (:func:`~.relocate._was_moving` with the rows written), as :meth:`_reacquire`
+        computed it once for the frame.
+
         The neighbours (``okn``) are the markers ok now, and those flagged only
         ``imprecise`` that were certain on the last :data:`_ANCHOR_FRAMES` frames
         (:meth:`_reacquire`).
@@ -182,7 +186,7 @@ class ReacquireStage:
             # be lost with it)
             near = np.flatnonzero(np.hypot(ref[:, 0] - ref[i, 0], ref[:, 1] - ref[i, 1]) <= self.local)
             near = near[near != i]
-            moves = _was_moving(self, res)[near]
+            moves = moving[near]
             if moves.any() and (~moves).any():
                 return None
         ti = int(self.hist_t[i, 0])
@@ -310,7 +314,7 @@ class ReacquireStage:
         anchor_away = _moving(self, X, Y, anchor) & roamed  # (anchors have positions)
         q = {}
         for i in lost.tolist():
-            r = self._predict_lost(i, okn[anchor_away[okn]] if moving[i] else okn, X, Y, res, t)
+            r = self._predict_lost(i, okn[anchor_away[okn]] if moving[i] else okn, X, Y, res, t, moving)
             if r is None:
                 logger.debug("frame %d: marker %d: no prediction (%d ok)", t, i, okn.size)
             else:
