@@ -1,8 +1,9 @@
 """Latent identity failures that a centring change brought out (the edge rule,
 docs/tracker.md item 3: tried in session 13, kept in 14; the inner disk, session 15): it
 moved positions and sigmas a little and the tracker took other paths, onto these. The first
-three had confident errors on commit 27bfded (branch s13-edge; checked), the last two with the
-inner disk before their mends (checked); each passes with the mend named beside it. Earlier
+three had confident errors on commit 27bfded (branch s13-edge; checked), the next two with the
+inner disk before their mends (checked), the last on session 15's final code (checked);
+each passes with the mend named beside it. Earlier
 code passed them by luck, so these guard the mends against the next change of centring."""
 import pytest
 
@@ -31,6 +32,11 @@ import pytest
     # blob, ok 17 px off for 43 frames (reacquire._predict_lost: not predicted when its
     # neighbours of the reference frame are both still and moving)
     ("hard", 82, "left", 100, 0.3),
+    # (fresh DEV seed 129, rendered after session 15) marker 20 at a 73 deg view: its
+    # streak and marker 21's blob joined without a dark gap, neither the other's split
+    # neighbour; 20 was centred on the pair, ok 2.4 px off and 0.5 px from 21's centre,
+    # 21 flagged merged there (Tracker._coincident: two centres on one blob)
+    ("bumped", 129, "right", 100, 0.5),
 ])
 def test_no_confident_error(independent_case, kind, seed, camera, n_frames, min_share):
     bad, share = independent_case(kind, seed, camera, n_frames)

@@ -52,6 +52,7 @@ from .status import (
     _RULE_REASON,
     _RULE_STATUS,
     COAST_PX,
+    COINCIDENT,
     FLAGGED,
     LOST,
     OK,
@@ -62,7 +63,7 @@ __all__ = ["fast_step", "BAIL_REASONS", "stats", "reset_stats", "summary"]
 
 #: Why a frame left the fast path (index = the kernel's return code; 0: handled).
 BAIL_REASONS = ("handled", "frame_check", "lost_marker", "wide_search", "search", "conflict", "foreign",
-                "fast_path_check", "constellation", "jump_or_vouch", "soft_flag", "no_markers")
+                "fast_path_check", "constellation", "jump_or_vouch", "soft_flag", "no_markers", "coincident")
 #: Frames per :data:`BAIL_REASONS` code since the import (or the last :func:`reset_stats`).
 stats = np.zeros(len(BAIL_REASONS), np.int64)
 _JUMP = _R["jump"]
@@ -380,6 +381,14 @@ def _build(key):
                     ST[i] = rule_status[k]
                     RS[i] = rule_reason[k]
                     break
+        # two markers centred on one blob (Tracker._coincident): the Python step flags them
+        for i in range(n):
+            if ST[i] != OK or not np.isfinite(X[i]):
+                continue
+            for j in range(n):
+                if j != i and (ST[j] == OK or ST[j] == FLAGGED) and np.isfinite(X[j]):
+                    if np.hypot(X[i] - X[j], Y[i] - Y[j]) < COINCIDENT * max(rb[i], rb[j]):
+                        return 12
         for i in range(n):
             # (a wide-search 'ambiguous' cannot occur here: no marker is searched wide)
             stay = (resid[i] < 0.5 and np.hypot(X[i] - hx[i, 0, 0], Y[i] - hx[i, 0, 1]) < 0.5 and S[i] >= 0.95

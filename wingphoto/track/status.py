@@ -46,6 +46,10 @@ _R = {name: i for i, name in enumerate(REASONS)}
 #: unseen (``gap - 1``): the motion model's error grows while it coasts (the jump rule, the
 #: constellation check of :class:`~.tracker.Tracker` and of the fast frame).
 COAST_PX = 2.0
+#: Two markers whose refined centres are closer than this many blob radii (the larger of
+#: the two) sit on one blob: neither is ok (``Tracker._coincident``; the fast frame hands
+#: such a frame to it).
+COINCIDENT = 1.0
 
 #: The status rules, in order (the last that applies wins): (reason, status, condition).
 RULES = (
