@@ -27,6 +27,19 @@ def test_missing_folder_and_bad_arguments(tmp_path):
         realdots.render_realdots("cam3", seed=0, folder=tmp_path)
     with pytest.raises(ValueError, match="n_frames must be >= 2"):
         realdots.render_realdots("cam1", seed=0, n_frames=1, folder=tmp_path)
+    with pytest.raises(ValueError, match="peak_speed must be"):
+        realdots.render_realdots("cam1", seed=0, peak_speed=(5, 3), folder=tmp_path)
+    with pytest.raises(ValueError, match="exposure must be"):
+        realdots.render_realdots("cam1", seed=0, exposure=1.5, folder=tmp_path)
+
+
+def test_a_milder_warp(folder):
+    """peak_speed and exposure choose a steadier sequence: slower, and sharp without blur."""
+    slow = realdots.render_realdots("cam2", seed=3, n_frames=12, size=160, folder=folder, peak_speed=(3, 5),
+                                    exposure=0.0)
+    speed = np.linalg.norm(np.diff(slow.points, axis=0), axis=2)
+    assert 1 < np.median(speed) < 8
+    assert slow.params["exposure"] == 0.0
 
 
 def test_truth_is_the_reference_through_the_warp(seq, folder):

@@ -123,7 +123,7 @@ def _warp_point(H, p):
     return q[:, :2] / q[:, 2:3]
 
 
-def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
+def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None, peak_speed=(10.0, 15.0), exposure=0.4):
     """Move a real photograph of dots by known warps: a tracking sequence with exact motion.
 
     Parameters
@@ -140,6 +140,11 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
         Width and height of the frames, px (default 256).
     folder : str or Path, optional
         Folder of the photographs (default :func:`default_folder`).
+    peak_speed : (float, float), optional
+        Range (px/frame) the peak speed at the view's centre is drawn from (default 10-15,
+        the validation sweep's; a milder warp, e.g. (3, 5), is a steadier camera rate).
+    exposure : float, optional
+        Exposure as a share of the frame interval (default 0.4; 0: no motion blur).
 
     Returns
     -------
@@ -150,7 +155,8 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
     FileNotFoundError
         The photographs are not there.
     ValueError
-        Unknown ``camera``; ``n_frames`` < 2 or ``size`` < 64.
+        Unknown ``camera``; ``n_frames`` < 2, ``size`` < 64, ``peak_speed`` not two
+        non-negative numbers in order or ``exposure`` outside [0, 1].
 
     Notes
     -----
@@ -161,7 +167,7 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
     scale 0.7-1, with a small perspective term), sampled by ``cv2.warpPerspective``
     (bicubic) at twice the resolution and reduced 2 x 2 (area average; the pixel-centre
     convention is kept exactly: frame pixel ``x`` is ``(x2 - 0.5) / 2`` of the doubled
-    grid). Motion blur averages seven warps within an exposure of 0.4 frame intervals (the truth is
+    grid). Motion blur averages seven warps within ``exposure`` frame intervals (the truth is
     at its middle). Then a moving glare blob (up to 40 DN) and a +-15 % flicker, the
     fixed-pattern noise (per-pixel offsets 2.5 DN, column offsets 1.5 DN, fixed for the
     sequence) and read noise (1.2 DN) on the frame's own grid, rounding to uint8. The
@@ -173,6 +179,12 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
         raise ValueError(f"n_frames must be >= 2, got {n_frames}")
     if size < 64:
         raise ValueError(f"size must be >= 64 px, got {size}")
+    lo_v, hi_v = (float(v) for v in peak_speed)
+    if not 0 <= lo_v <= hi_v:
+        raise ValueError(f"peak_speed must be (low, high) px/frame with 0 <= low <= high, got {peak_speed}")
+    exposure = float(exposure)
+    if not 0 <= exposure <= 1:
+        raise ValueError(f"exposure must be a share of the frame interval in [0, 1], got {exposure}")
     image, ref = _load(folder, camera)
     rng = np.random.default_rng([int(seed), zlib.crc32(camera.encode())])
     ih, iw = image.shape
@@ -188,12 +200,11 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
     arm = 1.3 * size
     hinge = c_out + np.array([side * arm, rng.uniform(-0.3, 0.3) * size])
     period = rng.uniform(50, 70)
-    speed = rng.uniform(10, 15)  # px/frame at the view's centre, peak
+    speed = rng.uniform(lo_v, hi_v)  # px/frame at the view's centre, peak
     amp = speed * period / (2 * np.pi * np.linalg.norm(hinge - c_out))
     phi = rng.uniform(0, 2 * np.pi)
     fore = rng.uniform(0.0, 0.3)
     persp = rng.uniform(-1, 1) * 3e-4
-    exposure = 0.4
 
     def H_at(t):
         th = amp * np.sin(2 * np.pi * t / period + phi)
@@ -223,7 +234,7 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None):
     for k in range(n_frames):
         Hs[k] = H_at(float(k))
         acc = np.zeros((size, size), np.float32)
-        subs = k + exposure * ((np.arange(7) + 0.5) / 7 - 0.5)
+        subs = k + exposure * ((np.arange(7) + 0.5) / 7 - 0.5) if exposure > 0 else [k]
         for t in subs:
             big = cv2.warpPerspective(image, S2 @ H_at(float(t)), (2 * size, 2 * size), flags=cv2.INTER_CUBIC,
                                       borderMode=cv2.BORDER_CONSTANT, borderValue=fill)
