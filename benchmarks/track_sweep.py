@@ -1,6 +1,10 @@
 """Validation sweep of the tracker over the synthetic scenarios and real dot texture.
 
-``python benchmarks/track_sweep.py [--set dev|test] [--scenarios NAME ...] [--seeds N]``
+``python benchmarks/track_sweep.py [--set dev|test] [--scenarios NAME ...] [--seeds N]
+[--real-speed LOW HIGH] [--real-exposure E]``
+
+(``--real-speed 3 5 --real-exposure 0``: the real dots on a milder warp, slower and
+without motion blur.)
 
 For every scenario of :mod:`wingphoto.synth.scenarios` (and the real-dot sequences of
 :mod:`wingphoto.synth.realdots` when ``../shared/data/real-dots`` is there), every seed of
@@ -93,6 +97,10 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=None, help="frames per sequence (default: each scenario's)")
     ap.add_argument("--thesis-frames", type=int, default=30, help="frames for the thesis baseline (0: skip)")
     ap.add_argument("--csv", default=None, help="output CSV (default benchmarks/track_sweep_<set>.csv)")
+    ap.add_argument("--real-speed", type=float, nargs=2, default=(10.0, 15.0), metavar=("LOW", "HIGH"),
+                    help="real dots: range of the peak speed, px/frame (default 10 15; 3 5: a milder warp)")
+    ap.add_argument("--real-exposure", type=float, default=0.4,
+                    help="real dots: exposure, share of the frame interval (default 0.4; 0: no motion blur)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)  # the tracker's per-sequence warnings (NaN picks) are expected
     unknown = [n for n in args.scenarios if n not in scenarios.SCENARIOS and n not in real_names]
@@ -105,13 +113,15 @@ def main(argv=None):
 
     def real(name, seed, n_frames):
         try:
-            return realdots.render_realdots(name.split("_", 1)[1], seed=seed, n_frames=n_frames)
+            return realdots.render_realdots(name.split("_", 1)[1], seed=seed, n_frames=n_frames,
+                                            peak_speed=tuple(args.real_speed), exposure=args.real_exposure)
         except FileNotFoundError as exc:
             print(f"{name}: skipped ({exc})")
             return None
 
     print(versions())
-    print(f"seed set {args.set}: scenarios {list(seeds)}, real dots {list(rseeds)}")
+    print(f"seed set {args.set}: scenarios {list(seeds)}, real dots {list(rseeds)} (peak speed "
+          f"{args.real_speed[0]:g}-{args.real_speed[1]:g} px/frame, exposure {args.real_exposure:g})")
     hdr = (f"{'scenario':18s} {'seqs':>4s} {'ok':>6s} {'ok(pk)':>6s} {'RMS':>6s} {'p95':>6s} {'worst':>6s} "
            f"{'conf':>5s} {'<=3sig':>6s} {'med e/s':>7s} {'fps':>6s} {'(CPU)':>6s}")
     print(hdr)
