@@ -2,7 +2,7 @@
 docs/tracker.md item 3: tried in session 13, kept in 14; the inner disk, session 15): it
 moved positions and sigmas a little and the tracker took other paths, onto these. The first
 three had confident errors on commit 27bfded (branch s13-edge; checked), the next two with the
-inner disk before their mends (checked), the last on session 15's final code (checked);
+inner disk before their mends (checked), the last two on session 15's final code (checked);
 each passes with the mend named beside it. Earlier
 code passed them by luck, so these guard the mends against the next change of centring."""
 import pytest
@@ -37,6 +37,11 @@ import pytest
     # neighbour; 20 was centred on the pair, ok 2.4 px off and 0.5 px from 21's centre,
     # 21 flagged merged there (Tracker._coincident: two centres on one blob)
     ("bumped", 129, "right", 100, 0.5),
+    # (fresh DEV seed 146) the wing lost for three frames and re-acquired at frame 34,
+    # three frames dropped right after: tip markers 18 and 24, with no neighbour ok on
+    # both frames, turned ok on other markers' blobs 13-16 px off at frame 35
+    # (IdentityStage._just_reacquired: judged as resuming after a gap)
+    ("dropped", 146, "right", 100, 0.5),
 ])
 def test_no_confident_error(independent_case, kind, seed, camera, n_frames, min_share):
     bad, share = independent_case(kind, seed, camera, n_frames)
