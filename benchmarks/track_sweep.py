@@ -71,7 +71,7 @@ def _track(frames, picks, camera):
 
 def _sequences(names, seeds, n_frames, real):
     """Yield (scenario, seed, sequence, cameras)."""
-    from wingphoto.synth import realdots, scenarios
+    from wingphoto.synth import scenarios
 
     for name in names:
         for seed in seeds:
