@@ -241,11 +241,38 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
                          _hopped=lambda idx, res, t, now=None: np.zeros(idx.size, bool),
                          _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
                          _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
-                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
+                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool),
+                         _just_reacquired=lambda idx, res: np.zeros(idx.size, bool))
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
     IdentityStage._vouch(tr, empty, np.arange(n), ctx, None, t)
     assert ctx.ST.tolist() == [OK, FLAGGED]
+
+
+def test_the_frame_after_a_reacquisition_needs_its_prediction():
+    # (fresh DEV seed 146 dropped right) markers re-acquired on the frame before, two points
+    # of their own, no neighbour to judge them: the one 3 px from its prediction is flagged,
+    # the one 1 px from it passes, and one not re-acquired (ok on the frame before) is not
+    # judged by its prediction
+    from wingphoto.track.status import _R
+
+    n, t = 3, 20
+    empty = np.zeros(0, np.int64)
+    res = SimpleNamespace(x=np.zeros((30, n)), reason=np.zeros((30, n), np.int8))
+    res.reason[t - 1, :2] = _R["reacquired"]
+    tr = SimpleNamespace(p=TrackOptions(), last_ok=np.full(n, t - 1), nh=np.array([2, 2, 2]),
+                         resid_rms=np.full(n, 0.5), _spacing=np.full(n, 15.0),
+                         _inconsistent=lambda *a, **k: (empty, empty),
+                         _hopped=lambda idx, res, t, now=None: np.zeros(idx.size, bool),
+                         _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
+                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
+    tr._just_reacquired = lambda idx, res: IdentityStage._just_reacquired(tr, idx, res)
+    ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
+                          ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.array([3.0, 1.0, 3.0]))
+    IdentityStage._vouch(tr, empty, np.arange(n), ctx, res, t)
+    assert ctx.ST.tolist() == [FLAGGED, OK, OK]
+    assert ctx.RS[0] == _R["jump"]
 
 
 def test_a_marker_whose_blob_was_disputed_does_not_resume_on_its_own_prediction():
