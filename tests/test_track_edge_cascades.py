@@ -2,7 +2,7 @@
 docs/tracker.md item 3: tried in session 13, kept in 14; the inner disk, session 15): it
 moved positions and sigmas a little and the tracker took other paths, onto these. The first
 three had confident errors on commit 27bfded (branch s13-edge; checked), the next two with the
-inner disk before their mends (checked), the last two on session 15's final code (checked);
+inner disk before their mends (checked), the last three on session 15's or an earlier session-16 code (checked);
 each passes with the mend named beside it. Earlier
 code passed them by luck, so these guard the mends against the next change of centring."""
 import pytest
@@ -42,6 +42,10 @@ import pytest
     # both frames, turned ok on other markers' blobs 13-16 px off at frame 35
     # (IdentityStage._just_reacquired: judged as resuming after a gap)
     ("dropped", 146, "right", 100, 0.5),
+    # (fresh DEV seed 169) marker 21 matched at its truth's pixel beside marker 22, which
+    # lost their conflict; its blob no longer split off, the refinement ran 2.7 px towards
+    # it, ok at sigma 0.20 (Tracker._absorbed)
+    ("black", 169, "left", 100, 0.5),
 ])
 def test_no_confident_error(independent_case, kind, seed, camera, n_frames, min_share):
     bad, share = independent_case(kind, seed, camera, n_frames)
