@@ -98,12 +98,14 @@ class IdentityStage:
             chk = np.union1d(chk, fine[(np.abs(t - self.last_ok[fine]) > 1) | (self.nh[fine] < 3)])
         if chk.size:
             bad, good = self._inconsistent(chk, X, Y, ST, res, t, both=True)
-            gap = np.abs(t - self.last_ok[chk]) > 1
-            unk = np.setdiff1d(chk[gap], np.concatenate([bad, good]))
-            far = unk[(resid[unk] > np.maximum(2.0, 2.0 * self.resid_rms[unk])) | (self.nh[unk] < 3)]
-            # (the frame after a re-acquisition: away from its own prediction, unvouched)
-            new = np.setdiff1d(chk[~gap & self._just_reacquired(chk, res)], np.concatenate([bad, good]))
-            far = np.concatenate([far, new[resid[new] > np.maximum(2.0, 2.0 * self.resid_rms[new])]])
+            # no neighbour's verdict: resuming after a gap, it needs three points of its own
+            # and to be near its own prediction; on the frame after its re-acquisition, to
+            # be near that prediction
+            open_ = np.setdiff1d(chk, np.concatenate([bad, good]))
+            gap = np.abs(t - self.last_ok[open_]) > 1
+            off = resid[open_] > np.maximum(2.0, 2.0 * self.resid_rms[open_])
+            unk = open_[gap]
+            far = open_[(gap & (off | (self.nh[open_] < 3))) | (~gap & off & self._just_reacquired(open_, res))]
             # (changed blob while not ok, or its blob was disputed: its own prediction may
             # follow the wrong blob)
             other_blob = unk[self._hopped(unk, res, t, now=(X, Y)) | self._disputed(unk, res, t)
