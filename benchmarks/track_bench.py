@@ -22,7 +22,12 @@ Every run prints the library versions (Python, numpy, numba, OpenCV), the CPU co
 the load average with the figures: on a shared machine compare the CPU-time column.
 
 The sequence is rendered first (anti-aliased discs moving as on a flapping wing, periodic
-so that it can be cycled without a jump) and held in memory, so decoding is not timed.
+so that it can be cycled without a jump) and held in memory, so decoding is not timed
+there. Decoding is timed on its own, and end to end: the wing render's 1000 frames are
+written to a temporary folder as one TIFF per frame (the thesis' exports) and as one
+multi-page TIFF, then read back with :func:`wingphoto.read_sequence` (every frame
+decoded, nothing tracked) and tracked straight from the files (``track_markers`` on the
+lazy sequence: decoding + tracking, as ``wingphoto track`` runs; ``--no-io`` skips it).
 Ratios are against ``track_thesis``. Then the peak memory (``tracemalloc``) of
 ``track_markers`` on lazily produced sequences of growing length shows that frames are
 streamed: what grows is only the result table (~0.5 kB per frame for 30 markers).
@@ -166,6 +171,39 @@ def _fast_share():
     return f"fast frame {s[0] / max(s.sum(), 1):.1%} of frames" if s.sum() else "fast frame not in use"
 
 
+def decode_and_track(wblock, wpicks, n, repeat):
+    """Rows (name, frames/s, CPU frames/s, note) for reading ``n`` frames of the wing render
+    from TIFF files, alone and with tracking, in a temporary folder (removed after)."""
+    import tempfile
+
+    import tifffile
+
+    from wingphoto import read_sequence
+    from wingphoto.track import track_markers
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="wingphoto-bench-") as tmp:
+        folder = os.path.join(tmp, "frames")
+        os.mkdir(folder)
+        for i in range(n):
+            tifffile.imwrite(os.path.join(folder, f"frame_{i:05d}.tif"), wblock[i % len(wblock)])
+        stack = os.path.join(tmp, "stack.tif")
+        with tifffile.TiffWriter(stack) as tw:
+            for i in range(n):
+                tw.write(wblock[i % len(wblock)], contiguous=True)
+        for label, source in (("one TIFF per frame", folder), ("multi-page TIFF", stack)):
+            def decode():
+                seq = read_sequence(source)
+                for i in range(len(seq)):
+                    seq[i]
+            (dt, cpu), _ = timed(decode, repeat)
+            rows.append((f"read_sequence ({label})", n / dt, n / cpu, f"{n} frames decoded, not tracked"))
+            (dt, cpu), _ = timed(lambda: track_markers(read_sequence(source), wpicks, progress=False), repeat)
+            rows.append((f"  + track_markers (end to end)", n / dt, n / cpu,
+                         "wing render read from the files and tracked"))
+    return rows
+
+
 def versions():
     """One line: the libraries and machine every figure depends on."""
     import platform
@@ -203,6 +241,7 @@ def main(argv=None):
     ap.add_argument("--legacy-sweep", action="store_true", help="the older phase sweep of this script")
     ap.add_argument("--sweep-args", nargs=argparse.REMAINDER, default=[],
                     help="arguments passed on to benchmarks/track_sweep.py")
+    ap.add_argument("--no-io", action="store_true", help="skip the decoding and end-to-end rows (TIFF files)")
     ap.add_argument("--realistic-frames", type=int, default=100,
                     help="frames of the realistic wing render, cycled to 1000 (default 100: one beat)")
     args = ap.parse_args(argv)
@@ -266,6 +305,8 @@ def main(argv=None):
             wt.engine.try_fast_frames(True)
         rows.append(("  (wing render, fast frame off)", 1000 / dt, 1000 / cpu,
                      "every frame stage by stage (the tracks are identical)"))
+    if not args.no_io:
+        rows += decode_and_track(wblock, wpicks, 1000, args.repeat)
     if wt.engine.use_numba():
         rows.append(("track_markers (no numba)", _rate_without_numba(T, args.repeat), np.nan,
                      "numpy/OpenCV code only (WINGPHOTO_NO_NUMBA=1)"))
