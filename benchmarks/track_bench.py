@@ -199,7 +199,7 @@ def decode_and_track(wblock, wpicks, n, repeat):
             (dt, cpu), _ = timed(decode, repeat)
             rows.append((f"read_sequence ({label})", n / dt, n / cpu, f"{n} frames decoded, not tracked"))
             (dt, cpu), _ = timed(lambda: track_markers(read_sequence(source), wpicks, progress=False), repeat)
-            rows.append((f"  + track_markers (end to end)", n / dt, n / cpu,
+            rows.append(("  + track_markers (end to end)", n / dt, n / cpu,
                          "wing render read from the files and tracked"))
     return rows
 
@@ -292,7 +292,7 @@ def main(argv=None):
     wt.fastpath.reset_stats()
     (dt, cpu), wtr = timed(lambda: track_markers(CycledFrames(wblock, 1000), wpicks, progress=False), args.repeat)
     nw = int(np.isfinite(wpicks[:, 0]).sum())
-    rows.append((f"track_markers (wing render, 1000)", 1000 / dt, 1000 / cpu,
+    rows.append(("track_markers (wing render, 1000)", 1000 / dt, 1000 / cpu,
                  f"{nw} markers, {wblock.shape[1]}x{wblock.shape[2]}; ok {np.mean(wtr.status == 'ok'):.3f}; "
                  f"wall {1000 / dt / disc[1]:.2f}x, CPU {1000 / cpu / disc[2]:.2f}x the disc row; "
                  f"{_fast_share()}"))
