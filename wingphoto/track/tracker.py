@@ -198,14 +198,11 @@ def _model_speed(hist_x, hist_t):
         return np.hypot(*(hist_x[:, 0] - hist_x[:, 1]).T) / dt
 
 
-def _median_residual(ctx, nh, among=None):
+def _median_residual(ctx, nh):
     """Median distance (px) of the markers found on a frame from their predictions (those
-    with two points of history, of ``among`` (boolean) if given); inf when there are none."""
-    sel = ctx.fits & (nh >= 2)
-    if among is not None:
-        sel = sel & among
+    with two points of history); inf when there are none."""
     with np.errstate(invalid="ignore"):
-        r = ctx.resid[sel]
+        r = ctx.resid[ctx.fits & (nh >= 2)]
     r = r[np.isfinite(r)]
     return float(np.median(r)) if r.size else np.inf
 
@@ -692,20 +689,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         them (:meth:`_shift_miss`). A dropped-frames
         hypothesis extrapolates further, so its markers may be ``_DROP_TOL`` px per frame
         dropped further from their predictions. The hypothesis that puts the most
-        moving markers where predicted (:meth:`_moving_now`, counted first: the still ones
-        are where predicted under every hypothesis of dropped or repeated frames, and when
-        they outnumber the wing they cannot choose between them), then the most markers,
-        then the smaller median residual of the moving ones, wins if it puts most of them
-        there (and most of the moving ones, when there are three), and is kept for the
-        next frames; without one, every point of the frame is flagged ``constellation``
-        and the motion model coasts over it. (Fresh DEV seed 226 dropped right, frame 34,
-        three frames dropped: 8 still markers and 3 wing markers were found, every
-        hypothesis put 9 of the 11 where predicted, and the tie went to "a repeated frame"
-        by the still markers' median residual; one wing marker stayed ok on its
-        neighbour's blob, 17 px off.)
+        markers where predicted (ties: the smaller median residual) wins if it puts most
+        of them there, and is kept for the next frames; without one, every point of the
+        frame is flagged ``constellation`` and the motion model coasts over it.
         """
         saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
-        moving = self._moving_now()  # (before any hypothesis moves the histories along)
         hyps = [(dt, 0.0, 0.0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0)]
         prev, prev2 = self._prev, self._prev2
         if prev is not None and prev.shape == frame.shape:
@@ -720,7 +708,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                 if math.hypot(sh.dx, sh.dy) > 1.0:
                     hyps.append((0, sh.dx, sh.dy))
         n0, good0 = self._consistent(ctx)
-        best, best_key = None, (self._consistent(ctx, among=moving)[1], good0, -np.inf)
+        best, best_key = None, (good0, -np.inf)
         if logger.isEnabledFor(logging.DEBUG):
             logger.debug("frame %d: as predicted: %d of %d markers where predicted (median residual %.2f px)",
                          t, good0, n0, _median_residual(ctx, self.nh))
@@ -739,13 +727,11 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
                     # still markers found near their shifted predictions measure its miss)
                     refined.add((float(dx + corr[0]), float(dy + corr[1])))
                     hyps.append((0, float(dx + corr[0]), float(dy + corr[1])))
-            n_mov, good_mov = self._consistent(c, _DROP_TOL * abs(dt), among=moving)
-            med = _median_residual(c, self.nh, among=moving if n_mov >= 3 else None)
-            logger.debug("frame %d: hypothesis %s: %d of %d markers where predicted, %d of %d moving ones "
-                         "(median residual %.2f px)", t, (dt, dx, dy), good, n, good_mov, n_mov, med)
-            most = n >= 3 and good >= _CONSTELLATION * n and (n_mov < 3 or good_mov >= _CONSTELLATION * n_mov)
-            if most and (good_mov, good, -med) > best_key:
-                best, best_key = (dt, dx, dy), (good_mov, good, -med)
+            med = _median_residual(c, self.nh)
+            logger.debug("frame %d: hypothesis %s: %d of %d markers where predicted (median residual %.2f px)",
+                         t, (dt, dx, dy), good, n, med)
+            if n >= 3 and good >= _CONSTELLATION * n and (good, -med) > best_key:
+                best, best_key = (dt, dx, dy), (good, -med)
         if best is None:
             self._set_model(saved, 0, 0.0, 0.0, direction)
             ctx = self._solve(frame, t)
