@@ -145,10 +145,10 @@ class FrameContext:
         Per-axis 1-sigma uncertainty (px), set by :meth:`Tracker._judge`.
     glitch : bool
         No hypothesis explained a broken constellation: every point is flagged.
-    unexplained : (N,) ndarray of bool or None
+    unexplained : (N,) ndarray of bool
         The moving markers, when the hypothesis chosen for a broken constellation put
-        most markers but not most of the moving ones where predicted: their points are
-        flagged (:meth:`Tracker._recover`).
+        most markers but not most of the moving ones where predicted (else none): their
+        points are flagged (:meth:`Tracker._recover`).
     shift : (2,) ndarray of float
         The camera's shift (px) measured on this frame (:meth:`Tracker._recover`; zero
         without a bump): the image moved by it besides the markers' own motion.
@@ -551,6 +551,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         RS[self.lostflag] = _R["lost_track"]
         return FrameContext(
             **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged, shift=np.zeros(2),
+            unexplained=np.zeros(n, bool),
             nbr_r=self.rd[np.maximum(plan["j2"][:, 0], 0)] + 0.5,
             XP=np.full(n, np.nan), YP=np.full(n, np.nan), S=np.full(n, np.nan), SEC=np.full(n, -2.0),
             lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
@@ -759,7 +760,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             # hypothesis put 9 of the 11 where predicted and 1 of the 3 moving ones; "a
             # repeated frame" won by the still markers' residual, and marker 13, after 3
             # dropped frames, stayed ok on marker 12's blob, 17 px off)
-            ctx.unexplained = moving
+            ctx.unexplained[:] = moving
             logger.info("frame %d: only %d of the %d moving markers where predicted: their points flagged", t,
                         good_mov, n_mov)
         if best[0] == 0:
@@ -901,7 +902,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             RS[eidx[~okm]] = _R["out_of_frame"]
             X[eidx[~okm]] = np.nan
             Y[eidx[~okm]] = np.nan
-        if ctx.glitch or ctx.unexplained is not None:
+        if ctx.glitch or ctx.unexplained.any():
             g = (ST == OK) & (True if ctx.glitch else ctx.unexplained)
             ST[g] = FLAGGED
             RS[g] = _R["constellation"]
