@@ -104,7 +104,7 @@ def test_bump_measured_short_by_the_global_shift_is_completed_by_the_still_marke
     static dots beside the moving discs) measure the rest of the bump."""
     from wingphoto.motion import ImageShift
     from wingphoto.synth import render_discs
-    from wingphoto.track import tracker as tracker_mod
+    from wingphoto.track import glitch as glitch_mod
 
     _, moving, d = moving_discs(5, T=40, speed=8.0)
     T = len(moving)
@@ -115,7 +115,7 @@ def test_bump_measured_short_by_the_global_shift_is_completed_by_the_still_marke
     rng = np.random.default_rng(3)
     diam = np.r_[d, 8.0, 8.0, 8.0]
     g = np.stack([render_discs(truth[t], diam, (150, 190), noise_std=2.0, rng=rng) for t in range(T)])
-    real = tracker_mod.estimate_shift
+    real = glitch_mod.estimate_shift
 
     def short(a, b, **kw):  # 2.3 px short of the bump on the bump's frame
         s = real(a, b, **kw)
@@ -123,7 +123,7 @@ def test_bump_measured_short_by_the_global_shift_is_completed_by_the_still_marke
             return ImageShift(s.dx * 0.6, s.dy * 0.6, s.response)
         return s
 
-    monkeypatch.setattr(tracker_mod, "estimate_shift", short)
+    monkeypatch.setattr(glitch_mod, "estimate_shift", short)
     with caplog.at_level(logging.INFO, logger="wingphoto.track"):
         tr = track_markers(g, np.rint(truth[0]), progress=False)
     err, status = _check(tr, truth)

@@ -482,6 +482,7 @@ _fast_frame = _build(_dependency_key())
 
 def _params(tr):
     """The constant arguments of :func:`_fast_frame` for tracker ``tr`` (made once)."""
+    from . import glitch as gl
     from . import tracker as tk
     from .options import _BRIDGE, _MERGE_VALLEY
 
@@ -490,8 +491,8 @@ def _params(tr):
                          p.ambiguity_margin, p.jump_px, _MERGE_VALLEY, _BRIDGE])
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
     fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._FADED, tk._WEAK, tk._BG_RESIDUAL_FADED,
-                     tk._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN])
-    return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=tk._SAMPLE, p=p)
+                     gl._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN])
+    return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=gl._SAMPLE, p=p)
 
 
 def fast_step(tr, frame, t, res):

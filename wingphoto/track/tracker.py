@@ -7,13 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..motion import estimate_shift, frame_content
 from . import engine
 from .fastpath import fast_step
 from .geometry import _nearest_two
-from .identity import STALL_PX, IdentityStage
+from .glitch import GlitchStage
+from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
-from .predict import shift_history, start_frame, update_model
+from .predict import start_frame, update_model
 from .reacquire import ReacquireStage
 from .relocate import relocate_group
 from .refine import (
@@ -26,14 +26,11 @@ from .refine import (
     split_neighbour,
 )
 from .sigma import sigma_of
-from .status import _IS_SOFT, _R, COAST_PX, COINCIDENT, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
+from .status import _IS_SOFT, _R, COINCIDENT, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
 from .templates import TemplateStage
 
 logger = logging.getLogger("wingphoto.track")
 
-#: A frame is checked for being blank or repeated on every _SAMPLE-th pixel of every
-#: _SAMPLE-th row first (cheap), then in full.
-_SAMPLE = 16
 #: a faded blob (peak below _FADED of its frame-0 peak, or score below _WEAK) on a ring this
 #: far from a plane (fraction of its contrast) is imprecise whatever its sigma
 _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
@@ -44,22 +41,6 @@ _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
 #: see (independent renderer, DEV seeds 3-52: all 9 ok points more than 1 px off had a score
 #: of 0.78-0.84 and sigma 0.21-0.25)
 _POOR_MATCH, _POOR_DROP, _POOR_MARGIN = 0.85, 0.03, 0.8
-#: The constellation is broken when fewer than this share of the markers with a velocity
-#: are found where predicted.
-_CONSTELLATION = 0.5
-#: A marker moving at least this fast (px/frame) votes in the moving markers' constellation
-#: check too (:meth:`Tracker._broken`): a repeated or dropped frame leaves a slower one
-#: within the motion model's limit of 2 px.
-_MOVING_PX = 1.0
-#: A frame on which most markers moving at least this fast (px/frame) are back where they
-#: were is a repeat (:meth:`Tracker._stalled`).
-_STALL_SPEED = 3.0
-#: A marker slower than this (px/frame) is still: it measures and confirms a camera shift
-#: (:meth:`Tracker._still_found`).
-_STILL_SPEED = 0.3
-#: Dropped-frame hypotheses tried (1 to _MAX_DROPPED frames), and the extra distance (px
-#: per frame dropped) a marker may lie from a prediction extrapolated over them.
-_MAX_DROPPED, _DROP_TOL = 6, 0.3
 _STAY = True
 #: An ok point this far (fraction of its spacing) from its prediction is checked against its
 #: neighbours' motion even when it was ok on the frame before: the motion model alone does
@@ -195,31 +176,14 @@ class FrameContext:
         return (np.asarray(disp, float) - shift) / (1 + max(self.aged, 0))
 
 
-def _model_speed(hist_x, hist_t):
-    """Each marker's speed (px a frame) over the last two points of its motion model's
-    history (NaN without two)."""
-    dt = np.abs(hist_t[:, 0] - hist_t[:, 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.hypot(*(hist_x[:, 0] - hist_x[:, 1]).T) / dt
-
-
-def _median_residual(ctx, nh):
-    """Median distance (px) of the markers found on a frame from their predictions (those
-    with two points of history); inf when there are none."""
-    with np.errstate(invalid="ignore"):
-        r = ctx.resid[ctx.fits & (nh >= 2)]
-    r = r[np.isfinite(r)]
-    return float(np.median(r)) if r.size else np.inf
-
-
-class Tracker(TemplateStage, IdentityStage, ReacquireStage):
+class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
     """State of one tracking pass; :meth:`step` processes one frame.
 
     The tracker holds only what persists from frame to frame; what one frame computes is
     in its :class:`FrameContext`. The stage methods come from the mixins
     (:class:`~.templates.TemplateStage`, :class:`~.identity.IdentityStage`,
-    :class:`~.reacquire.ReacquireStage`) and read the state below. Arrays have one entry
-    per marker (N, in the order of the picks).
+    :class:`~.reacquire.ReacquireStage`, :class:`~.glitch.GlitchStage`) and read the
+    state below. Arrays have one entry per marker (N, in the order of the picks).
 
     Attributes
     ----------
@@ -486,39 +450,6 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
             self._update(frame, t, res, direction, ctx)
         self._prev2, self._prev = self._prev, frame
 
-    def _frame_glitch(self, frame, t, res, direction):
-        """Handle a blank (constant: black, saturated) or repeated (byte-identical) frame.
-
-        A blank frame's points are lost (reason ``blank``) and the motion model coasts;
-        a repeated frame gets the previous frame's rows (the same image: the same
-        positions) and the motion model's history moves one frame on, as time did not
-        advance. Returns True when the frame was handled.
-
-        Reads the previous frame ``_prev``; writes ``pos`` (blank), ``hist_t`` and
-        ``last_ok`` (repeated) and rows ``t`` of ``res``."""
-        s = frame[:: _SAMPLE, :: _SAMPLE]
-        floating = frame.dtype.kind == "f"
-        if not (s.max() > s.min()) or (floating and not np.isfinite(s).all()):
-            blank = frame_content(frame) == 0 or (floating and not np.isfinite(s).all())
-            if blank:
-                res.status[t] = LOST
-                res.reason[t] = _R["blank"]
-                self.pos = np.full((len(self.h), 2), np.nan)
-                return True
-        prev = self._prev
-        if prev is None or prev.shape != frame.shape:
-            return False
-        if not (np.array_equal(s, prev[:: _SAMPLE, :: _SAMPLE]) and np.array_equal(frame, prev)):
-            return False
-        tp = t - direction
-        if not 0 <= tp < res.x.shape[0]:
-            return False
-        for k in ("x", "y", "score", "xpix", "ypix", "status", "reason", "sigma"):
-            getattr(res, k)[t] = getattr(res, k)[tp]
-        self.hist_t += direction  # the past is one frame nearer
-        self.last_ok[self.last_ok == tp] = t
-        return True
-
     def _solve(self, frame, t, aged=0):
         """Predict, match and refine every marker on frame ``t``; returns its :class:`FrameContext`.
 
@@ -625,218 +556,6 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage):
         redo = (changed & np.isfinite(XP)).nonzero()[0]
         if redo.size:
             X[redo], Y[redo], mass[redo] = self._refine_at(frame, redo, nb2, ctx)
-
-    # ------------------------------------------------------------ constellation
-    def _consistent(self, ctx, extra=0.0, among=None):
-        """(number of checkable markers, number of them found where predicted).
-
-        Checkable: matched markers with a velocity (two or more reliable points, at most
-        one frame coasted), of ``among`` (boolean) if given; found where predicted:
-        residual within the motion model's limit (``max(2 px, 4 rms + COAST_PX (gap - 1))``,
-        plus ``extra`` px) and a score of at least ``min_score``.
-        """
-        gap = ctx.gap
-        chk = ctx.fits & (self.nh >= 2) & (gap <= 2)
-        if among is not None:
-            chk &= among
-        lim = np.maximum(2.0, 4.0 * self.resid_rms + COAST_PX * (gap - 1)) + extra
-        with np.errstate(invalid="ignore"):
-            good = chk & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
-        return int(chk.sum()), int(good.sum())
-
-    def _broken(self, ctx):
-        """True when most markers (and at least 3) left their predictions on this frame,
-        or most of the moving ones (:meth:`_moving_now`, at least 3).
-
-        Still markers (the mount, reference dots) are where predicted on a frame repeated
-        with new noise or after dropped frames too: outvoting the wing, they let such a
-        glitch pass as a frame on which the wing stopped (its markers vouched for by each
-        other), and the stall, fed to the motion model, predicted each marker back by a
-        frame's motion, onto a neighbour's blob (independent renderer, repeated, extra DEV
-        seed 5 left: ok 13 px off after a renoised repeat)."""
-        n, good = self._consistent(ctx)
-        if n >= 3 and good < _CONSTELLATION * n:
-            return True
-        moving = self._moving_now()
-        n, good = self._consistent(ctx, among=moving)
-        return (n >= 3 and good < _CONSTELLATION * n) or self._stalled(ctx)
-
-    def _stalled(self, ctx):
-        """True when most of the fast markers (moving >= ``_STALL_SPEED`` px a frame, at
-        least 3, fed on the frame before) are back where they were on the frame before
-        (within ``STALL_PX``): a frame repeated with new noise. A wing moving that fast does
-        not stop dead at once; at a motion model's limit of a few px, the stall passed as
-        the whole wing stopping, was fed to the model and predicted a marker back onto its
-        neighbour's blob (independent renderer, repeated, extra DEV seed 5 left: ok 13 px
-        off). Slower markers do stop within a frame (real dots at 1-1.6 px a frame, at a
-        warp's reversal: taken for a repeat, 5 ok points up to 36 px off)."""
-        m = (self._moving_now(_STALL_SPEED) & ctx.fits & (ctx.gap == 1)).nonzero()[0]
-        if m.size < 3:
-            return False
-        with np.errstate(invalid="ignore"):
-            still = np.hypot(ctx.X[m] - self.hist_x[m, 0, 0], ctx.Y[m] - self.hist_x[m, 0, 1]) < STALL_PX
-        return bool(still.sum() > _CONSTELLATION * m.size)
-
-    def _moving_now(self, speed=_MOVING_PX):
-        """Markers whose motion model (three reliable points: not one just re-acquired with
-        its neighbours' velocity) moves them at least ``speed`` px a frame (boolean)."""
-        with np.errstate(invalid="ignore"):
-            return (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) >= speed)
-
-    def _recover(self, frame, t, direction, ctx):
-        """Explain a broken constellation by a glitch, or flag the frame.
-
-        Hypotheses, each tried by solving the frame again: 1 to ``_MAX_DROPPED`` frames
-        dropped (each marker's history moved that many frames along its own quadratic,
-        :func:`~.predict.shift_history`), a frame repeated with new noise (one back), and
-        a camera bump - the global shift between the previous and this frame
-        (:func:`wingphoto.motion.estimate_shift`) added to the history, confirmed by the
-        still markers (:meth:`_bump_holds`) and solved once more with its miss measured on
-        them (:meth:`_shift_miss`). A dropped-frames
-        hypothesis extrapolates further, so its markers may be ``_DROP_TOL`` px per frame
-        dropped further from their predictions. The hypothesis that puts the most
-        markers where predicted (ties: the smaller median residual) wins if it puts most
-        of them there, and is kept for the next frames; without one, every point of the
-        frame is flagged ``constellation`` and the motion model coasts over it.
-        """
-        saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
-        moving = self._moving_now()  # (before a hypothesis moves the histories along)
-        hyps = [(dt, 0.0, 0.0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0)]
-        prev, prev2 = self._prev, self._prev2
-        if prev is not None and prev.shape == frame.shape:
-            # the image's global shift holds the camera's jump and the wing's own motion:
-            # the jump is the change of the global shift from the frame before
-            sh = estimate_shift(prev, frame)
-            if sh.response > 0.05:
-                if prev2 is not None and prev2.shape == frame.shape:
-                    s0 = estimate_shift(prev2, prev)
-                    if s0.response > 0.05 and math.hypot(sh.dx - s0.dx, sh.dy - s0.dy) > 1.0:
-                        hyps.append((0, sh.dx - s0.dx, sh.dy - s0.dy))
-                if math.hypot(sh.dx, sh.dy) > 1.0:
-                    hyps.append((0, sh.dx, sh.dy))
-        n0, good0 = self._consistent(ctx)
-        best, best_key = None, (good0, -np.inf)
-        if logger.isEnabledFor(logging.DEBUG):
-            logger.debug("frame %d: as predicted: %d of %d markers where predicted (median residual %.2f px)",
-                         t, good0, n0, _median_residual(ctx, self.nh))
-        refined = set()
-        for dt, dx, dy in hyps:
-            self._set_model(saved, dt, dx, dy, direction)
-            c = self._solve(frame, t, aged=dt)
-            n, good = self._consistent(c, _DROP_TOL * abs(dt))
-            if dt == 0 and not self._bump_holds(c, saved[0], dx, dy):
-                logger.debug("frame %d: the still markers did not move by (%.2f, %.2f) px: no camera shift", t, dx, dy)
-                continue
-            if dt == 0 and (dx, dy) not in refined:
-                corr = self._shift_miss(c)
-                if corr is not None and all(math.hypot(dx + corr[0] - a, dy + corr[1] - b) > 0.25 for a, b in refined):
-                    # (the image's global shift is pulled by the wing's own motion: the
-                    # still markers found near their shifted predictions measure its miss)
-                    refined.add((float(dx + corr[0]), float(dy + corr[1])))
-                    hyps.append((0, float(dx + corr[0]), float(dy + corr[1])))
-            med = _median_residual(c, self.nh)
-            logger.debug("frame %d: hypothesis %s: %d of %d markers where predicted (median residual %.2f px)",
-                         t, (dt, dx, dy), good, n, med)
-            if n >= 3 and good >= _CONSTELLATION * n and (good, -med) > best_key:
-                best, best_key = (dt, dx, dy), (good, -med)
-        if best is None:
-            self._set_model(saved, 0, 0.0, 0.0, direction)
-            ctx = self._solve(frame, t)
-            ctx.glitch = True
-            logger.info("frame %d: most markers left their predictions and no glitch explains it: flagged", t)
-            return ctx
-        self._set_model(saved, *best, direction)
-        logger.info("frame %d: constellation restored by %s", t,
-                    f"{best[0]} frame(s) dropped" if best[0] > 0 else "a repeated frame" if best[0] < 0
-                    else f"a camera shift of ({best[1]:.1f}, {best[2]:.1f}) px")
-        ctx = self._solve(frame, t, aged=best[0])
-        ctx.shift = np.array(best[1:], float)
-        n_mov, good_mov = self._consistent(ctx, _DROP_TOL * abs(best[0]), among=moving)
-        if n_mov >= 3 and good_mov < _CONSTELLATION * n_mov:
-            # the still markers are where predicted under every hypothesis of dropped or
-            # repeated frames: outnumbering a few wing markers, they choose one that does
-            # not explain the wing, whose markers are then not trusted on this frame (fresh
-            # DEV seed 226 dropped right, frame 34: 8 still and 3 wing markers, every
-            # hypothesis put 9 of the 11 where predicted and 1 of the 3 moving ones; "a
-            # repeated frame" won by the still markers' residual, and marker 13, after 3
-            # dropped frames, stayed ok on marker 12's blob, 17 px off)
-            ctx.unexplained[:] = moving
-            logger.info("frame %d: only %d of the %d moving markers where predicted: their points flagged", t,
-                        good_mov, n_mov)
-        if best[0] == 0:
-            # the image's global shift is pulled by the wing's own motion: the markers found
-            # where predicted (the still ones exactly) measure what it missed, and the
-            # motion model and the reference layout take the shift as measured (else the
-            # next frame extrapolates the miss as a velocity)
-            lim = np.maximum(2.0, 4.0 * self.resid_rms + COAST_PX * (ctx.gap - 1))
-            with np.errstate(invalid="ignore"):
-                good = ctx.fits & (self.nh >= 2) & (ctx.gap <= 2) & (ctx.resid <= lim) & (ctx.S >= self.p.min_score)
-            if good.sum() >= 3:
-                cx = float(np.median(ctx.X[good] - ctx.pred[good, 0]))
-                cy = float(np.median(ctx.Y[good] - ctx.pred[good, 1]))
-                lost = self.lostflag.copy()  # (as this frame's plan left it)
-                self._set_model(saved, 0, best[1] + cx, best[2] + cy, direction)
-                self.lostflag[...] = lost
-                ctx.shift = np.array([best[1] + cx, best[2] + cy])
-                logger.debug("frame %d: camera shift measured on %d markers: (%.2f, %.2f) px", t, int(good.sum()),
-                             best[1] + cx, best[2] + cy)
-        return ctx
-
-    def _still_found(self, c):
-        """Markers still by their motion model (speed below ``_STILL_SPEED``, three points
-        of history; a camera-shift hypothesis moves every point of a history alike, so the
-        speed is the one before it) and found on ``c`` with ``min_score`` (indices): the
-        mount and the reference dots, which move on the image only when the camera does."""
-        with np.errstate(invalid="ignore"):
-            m = (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) < _STILL_SPEED) & c.fits & (c.gap == 1) & (c.S >= self.p.min_score)
-        return m.nonzero()[0]
-
-    def _bump_holds(self, c, hx, dx, dy):
-        """Whether a camera-shift hypothesis's solution ``c`` is one: a bump moves the still
-        markers (:meth:`_still_found`, at least 2; with fewer nothing says no) by the
-        shift, so they must lie nearer, in the median, to their positions on the frame
-        before (``hx``) plus (dx, dy) than to those positions. The search windows and the
-        residual limits (2 px and more) are wider than a small shift: a dropped frame had
-        been taken for a shift of (-1.4, -0.9) px, which moved the reference layout under
-        the still dots and let their affine map re-acquire a wing marker on its
-        neighbour's blob (independent renderer, dropped extra DEV seed 15 right: ok 44 px
-        off, frames 90-99, with a first version of :meth:`_shift_miss` that measured the
-        miss on all markers)."""
-        m = self._still_found(c)
-        if m.size < 2:
-            return True
-        ex, ey = c.X[m] - hx[m, 0, 0], c.Y[m] - hx[m, 0, 1]
-        return bool(np.median(np.hypot(ex - dx, ey - dy)) < np.median(np.hypot(ex, ey)))
-
-    def _shift_miss(self, c):
-        """What a camera-shift hypothesis missed (px, (2,)): the per-axis median of the
-        still markers' (:meth:`_still_found`) offsets from their shifted predictions, or
-        None when fewer than 2 were found or the miss is below half a pixel. Only the still
-        markers measure the camera: on a scene of moving markers alone, the markers' own
-        offsets fold the motion model's error into the shift, and frame after frame was
-        "explained" by a new shift (a dropped frame on translating discs: markers slid to
-        their neighbours, 28 px off)."""
-        m = self._still_found(c)
-        if m.size < 2:
-            return None
-        corr = np.array([np.median(c.X[m] - c.pred[m, 0]), np.median(c.Y[m] - c.pred[m, 1])])
-        return corr if math.hypot(*corr) > 0.5 else None
-
-    def _set_model(self, saved, dt, dx, dy, direction):
-        """Restore the motion model and the picks' frame's positions from ``saved``, then
-        move the history ``dt`` frames along each marker's motion
-        (:func:`~.predict.shift_history`) and shift its positions, and ``ref_pos``, by
-        (dx, dy) px: after a camera bump the reference layout is seen in the new pose too
-        (the re-acquisition tells still markers from moving ones by their distance to it)."""
-        hx, ht, lf, ref = saved
-        self.hist_x[...] = shift_history(hx, ht, self.nh, dt * direction) if dt else hx
-        self.hist_t[...] = ht
-        self.lostflag[...] = lf
-        # (a new array: a verify pass's tracker is a shallow copy sharing this one)
-        self.ref_pos = ref + np.array([dx, dy])
-        if dx or dy:
-            self.hist_x[..., 0] += dx
-            self.hist_x[..., 1] += dy
 
     # ------------------------------------------------------------ status
     def _judge(self, t, res, ctx):
