@@ -83,3 +83,45 @@ def test_scoring_a_one_camera_sequence(seq):
                        "x": seq.points[..., 0].ravel() + 0.1, "y": seq.points[..., 1].ravel(), "status": "ok"})
     s = score_tracks(tr, seq, "cam2")
     assert s["ok_share"] == 1.0 and s["rms_px"] == pytest.approx(0.1) and s["confident_errors"] == 0
+
+
+@pytest.fixture(scope="module")
+def long_seq(folder):
+    return realdots.render_realdots("cam1", seed=4, n_frames=25 + realdots.GLITCH_SPARE, size=128, folder=folder)
+
+
+def test_glitches_carry_the_truth_with_them(long_seq):
+    """Each glitch changes the frames and moves the truth with them: dropped frames skip
+    source frames (images and truth alike), repeats deliver a frame twice (the first
+    byte-identical, the others re-noised), black frames are zero and not visible, a bump
+    shifts image and truth together."""
+    src = long_seq
+    d = realdots.with_glitch(src, "dropped", seed=1)
+    gone = d.params["glitch"]["dropped_source_frames"]
+    kept = np.setdiff1d(np.arange(len(src)), gone)[: len(d)]
+    assert len(d) == 25 and len(gone) == 5
+    assert np.array_equal(d.images, src.images[kept]) and np.allclose(d.points, src.points[kept])
+
+    r = realdots.with_glitch(src, "repeated", seed=1)
+    twice = np.flatnonzero([np.allclose(r.points[i], r.points[i - 1]) for i in range(1, len(r))]) + 1
+    assert len(twice) == 3
+    identical = [np.array_equal(r.images[i], r.images[i - 1]) for i in twice]
+    assert sum(identical) == 1  # one byte-identical repeat, two re-noised
+    for i in twice:
+        diff = np.abs(r.images[i].astype(int) - r.images[i - 1].astype(int))
+        assert diff.mean() < 3  # re-noised, not another frame
+
+    b = realdots.with_glitch(src, "black", seed=1)
+    black = b.params["glitch"]["black_frames"]
+    assert b.images[black].max() == 0 and not b.visible[black].any()
+    assert np.array_equal(np.delete(b.images, black, 0), np.delete(src.images[:25], black, 0))
+
+    m = realdots.with_glitch(src, "bumped", seed=1)
+    k, (dx, dy) = m.params["glitch"]["bumped_from"], m.params["glitch"]["shift"]
+    assert np.allclose(m.points[k:], src.points[k:25] + (dx, dy)) and np.allclose(m.points[:k], src.points[:k])
+    assert np.array_equal(m.images[k, 20:100, 20:100], src.images[k, 20 - dy:100 - dy, 20 - dx:100 - dx])
+
+    with pytest.raises(ValueError, match="kind must be one of"):
+        realdots.with_glitch(src, "shaken", seed=1)
+    with pytest.raises(ValueError, match="render more frames"):
+        realdots.with_glitch(src, "dropped", seed=1, n_frames=len(src))

@@ -25,7 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["CAMERAS", "DEV_SEEDS", "TEST_SEEDS", "RealDotSequence", "default_folder", "render_realdots"]
+__all__ = ["CAMERAS", "DEV_SEEDS", "GLITCHES", "TEST_SEEDS", "RealDotSequence", "default_folder", "render_realdots",
+           "with_glitch"]
 
 #: The photographs: camera name -> (image file, reference centroid file).
 _FILES = {"cam1": ("cal1.tif", "cam1_cal_points"), "cam2": ("cal2.tif", "cam2_cal_points")}
@@ -33,6 +34,10 @@ CAMERAS = tuple(_FILES)
 #: Seeds to develop on, and held-out seeds to report.
 DEV_SEEDS = (0, 1, 2)
 TEST_SEEDS = (1000, 1001, 1002)
+#: The glitches :func:`with_glitch` puts into a sequence.
+GLITCHES = ("dropped", "repeated", "black", "bumped")
+#: Source frames a glitched sequence needs beyond the frames it delivers (the dropped ones).
+GLITCH_SPARE = 5
 
 
 def default_folder():
@@ -260,3 +265,84 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None, peak_
                   margin_px=margin, reference_rows=np.flatnonzero(keep).tolist())
     return RealDotSequence(camera=camera, images=frames, points=pts[:, keep], visible=vis[:, keep],
                            homographies=Hs, params=params)
+
+
+def with_glitch(seq, kind, *, seed, n_frames=None):
+    """A copy of a real-dot sequence with a recording glitch in it, the truth following.
+
+    Parameters
+    ----------
+    seq : RealDotSequence
+        Rendered with at least ``n_frames + GLITCH_SPARE`` frames.
+    kind : {'dropped', 'repeated', 'black', 'bumped'}
+        ``'dropped'``: two single frames and a run of three are left out (the truth
+        skips with them); ``'repeated'``: three frames are delivered twice, the first
+        repeat byte-identical and the other two with new read noise (1.5 DN);
+        ``'black'``: two frames are all zero (their dots not visible); ``'bumped'``:
+        from a frame between 15 and 44 on, the image and its truth are shifted by
+        3-7 px in x and 2-5 px in y (whole pixels, edges replicated; dots within 6 px of
+        the border then not visible).
+    seed : int
+        Chooses where the glitch falls and the bump's shift.
+    n_frames : int, optional
+        Frames delivered (default ``len(seq) - GLITCH_SPARE``).
+
+    Returns
+    -------
+    RealDotSequence
+        ``params["glitch"]`` says what was done (frames of the delivered sequence, or of
+        the source sequence for ``'dropped'``); ``homographies`` are the source frames'
+        (without the bump).
+
+    Raises
+    ------
+    ValueError
+        Unknown ``kind``, or ``seq`` too short for ``n_frames``.
+    """
+    if kind not in GLITCHES:
+        raise ValueError(f"kind must be one of {list(GLITCHES)}, got {kind!r}")
+    n_out = len(seq) - GLITCH_SPARE if n_frames is None else int(n_frames)
+    if n_out < 20 or len(seq) < n_out + GLITCH_SPARE:
+        raise ValueError(f"with_glitch needs n_frames >= 20 and a sequence of n_frames + {GLITCH_SPARE} frames; "
+                         f"got n_frames {n_out} from {len(seq)} frames: render more frames")
+    rng = np.random.default_rng([int(seed), zlib.crc32(kind.encode())])
+    img, pts, vis = np.array(seq.images), np.array(seq.points, float), np.array(seq.visible)
+    src = np.arange(n_out)
+    info = {"kind": kind}
+    if kind == "dropped":
+        keep = np.ones(n_out + GLITCH_SPARE, bool)
+        keep[rng.choice(np.arange(5, n_out - 8), 2, replace=False)] = False
+        free = np.flatnonzero(keep[5:-6]) + 5
+        start = int(rng.choice(free[np.isin(free + 1, free) & np.isin(free + 2, free)]))
+        keep[start:start + 3] = False
+        src = np.flatnonzero(keep)[:n_out]
+        info["dropped_source_frames"] = np.flatnonzero(~keep).tolist()
+    elif kind == "repeated":
+        rep = np.sort(rng.choice(np.arange(4, n_out - 6), 3, replace=False))
+        src = np.sort(np.concatenate([np.arange(n_out - 3), rep]))
+        info["repeated_source_frames"] = rep.tolist()
+    img, pts, vis = img[src], pts[src], vis[src]
+    if kind == "repeated":
+        again = np.flatnonzero(np.r_[False, src[1:] == src[:-1]])  # the second delivery of each
+        for i in again[src[again] != rep[0]]:
+            noisy = img[i].astype(np.float64) + rng.normal(0.0, 1.5, img[i].shape)
+            img[i] = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+    elif kind == "black":
+        black = np.sort(rng.choice(np.arange(5, n_out - 5), 2, replace=False))
+        img[black] = 0
+        vis[black] = False
+        info["black_frames"] = black.tolist()
+    elif kind == "bumped":
+        k = int(rng.integers(15, 45))
+        dx, dy = (int(rng.integers(lo, hi)) * int(rng.choice([-1, 1])) for lo, hi in ((3, 8), (2, 6)))
+        h, w = img.shape[1:]
+        M = np.float32([[1, 0, dx], [0, 1, dy]])
+        for t in range(k, n_out):
+            img[t] = cv2.warpAffine(img[t], M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
+        pts[k:] += (dx, dy)
+        margin = float(seq.params.get("margin_px", 6.0))
+        vis[k:] &= np.all((pts[k:] >= margin) & (pts[k:] <= np.array([w, h]) - 1 - margin), axis=2)
+        info.update(bumped_from=k, shift=(dx, dy))
+    params = dict(seq.params, n_frames=n_out, glitch=info)
+    return RealDotSequence(camera=seq.camera, images=img, points=pts, visible=vis,
+                           homographies=np.array(seq.homographies)[src], params=params)
