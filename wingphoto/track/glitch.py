@@ -24,7 +24,7 @@ import numpy as np
 
 from ..motion import estimate_shift, frame_content
 from .identity import STALL_PX
-from .predict import shift_history
+from .predict import STILL_SPEED, model_speed, shift_history
 from .status import _R, COAST_PX, LOST
 
 logger = logging.getLogger("wingphoto.track")
@@ -42,20 +42,9 @@ _MOVING_PX = 1.0
 #: A frame on which most markers moving at least this fast (px/frame) are back where they
 #: were is a repeat (:meth:`_stalled`).
 _STALL_SPEED = 3.0
-#: A marker slower than this (px/frame) is still: it measures and confirms a camera shift
-#: (:meth:`_still_found`).
-_STILL_SPEED = 0.3
 #: Dropped-frame hypotheses tried (1 to _MAX_DROPPED frames), and the extra distance (px
 #: per frame dropped) a marker may lie from a prediction extrapolated over them.
 _MAX_DROPPED, _DROP_TOL = 6, 0.3
-
-
-def _model_speed(hist_x, hist_t):
-    """Each marker's speed (px a frame) over the last two points of its motion model's
-    history (NaN without two)."""
-    dt = np.abs(hist_t[:, 0] - hist_t[:, 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.hypot(*(hist_x[:, 0] - hist_x[:, 1]).T) / dt
 
 
 def _median_residual(ctx, nh):
@@ -160,7 +149,7 @@ class GlitchStage:
         """Markers whose motion model (three reliable points: not one just re-acquired with
         its neighbours' velocity) moves them at least ``speed`` px a frame (boolean)."""
         with np.errstate(invalid="ignore"):
-            return (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) >= speed)
+            return (self.nh >= 3) & (model_speed(self.hist_x, self.hist_t) >= speed)
 
     def _recover(self, frame, t, direction, ctx):
         """Explain a broken constellation by a glitch, or flag the frame.
@@ -262,12 +251,12 @@ class GlitchStage:
         return ctx
 
     def _still_found(self, c):
-        """Markers still by their motion model (speed below ``_STILL_SPEED``, three points
+        """Markers still by their motion model (speed below ``STILL_SPEED``, three points
         of history; a camera-shift hypothesis moves every point of a history alike, so the
         speed is the one before it) and found on ``c`` with ``min_score`` (indices): the
         mount and the reference dots, which move on the image only when the camera does."""
         with np.errstate(invalid="ignore"):
-            m = (self.nh >= 3) & (_model_speed(self.hist_x, self.hist_t) < _STILL_SPEED) & c.fits & (c.gap == 1) & (c.S >= self.p.min_score)
+            m = (self.nh >= 3) & (model_speed(self.hist_x, self.hist_t) < STILL_SPEED) & c.fits & (c.gap == 1) & (c.S >= self.p.min_score)
         return m.nonzero()[0]
 
     def _bump_holds(self, c, hx, dx, dy):

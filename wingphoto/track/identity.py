@@ -8,6 +8,7 @@ import numpy as np
 from .geometry import _apply_affine, _fit_affine, _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
+from .predict import STILL_SPEED, model_speed
 from .reacquire import _determined
 from .relocate import STILL_PX
 from .status import _R, FLAGGED, OK
@@ -48,6 +49,12 @@ def _frames_since(t0, t, T):
     if not 0 <= t0 < T:
         return np.zeros(0, np.int64)
     return np.arange(t0, t, 1 if t > t0 else -1)[1:]
+
+
+#: The wide-search consensus (:meth:`IdentityStage._consensus`) takes only markers with a
+#: motion model that moves them as anchors when at least this many lie within a marker's
+#: neighbourhood.
+_TRACKED_ANCHORS = 3
 
 
 class IdentityStage:
@@ -510,7 +517,7 @@ class IdentityStage:
             near = wsel & (np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) < 0.5 * self._spacing[idx])
             second[near] = self._runner_up_by_matches(idx[near], maps[near], shp[near], origin[near], excl[near],
                                                       idx, mx, my, pred, j2)
-            self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl)
+            self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl, ctx.unvouched)
         XP[idx] = mx
         YP[idx] = my
         S[idx] = score
@@ -543,20 +550,23 @@ class IdentityStage:
                 others.append(o)
         return _analyse_maps(maps, shp, excl, others)[3]
 
-    def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl):
+    def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl, unvouched):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
 
         Each wide-searched marker's displacement from the reference frame is predicted from
         its nearest anchors (up to six, within ``self.local`` px in the reference frame):
         the other markers with a motion model (at their predictions) and the wide-searched
-        markers whose match is unambiguous (:func:`_neighbour_prediction`: a robust affine
-        map, or the mean displacement of a group that moved alike), so that static mount
-        and reference dots next to the wing, or a look-alike, do not decide. An ambiguous
-        (or low-score) match is replaced by a search of radius 4 at the prediction; an
-        unambiguous match that disagrees with the prediction is made ambiguous (flagged,
-        not trusted), never moved. Without such a group the match
-        stands as it is. Prevents a marker starting (or restarting) on its neighbour's or
-        an unpicked marker's blob when its own is dim or the two look alike.
+        markers whose match is unambiguous - only moving markers of the former when at
+        least :data:`_TRACKED_ANCHORS` of them are there - (:func:`_neighbour_prediction`: a
+        robust affine map, or the mean displacement of a group that moved alike), so that
+        static mount and reference dots next to the wing, or a look-alike, do not decide.
+        An ambiguous (or low-score) match is replaced by a search of radius 4 at the
+        prediction; an unambiguous match that disagrees with the prediction is made
+        ambiguous (flagged, not trusted), never moved. Without such a group the match
+        stands as it is, but one further than half the marker's spacing from where it was
+        while its neighbours did not move together is marked in ``unvouched`` (its point
+        is flagged ``ambiguous``). Prevents a marker starting (or restarting) on its
+        neighbour's or an unpicked marker's blob when its own is dim or the two look alike.
         """
         p = self.p
         n = len(self.h)
@@ -564,6 +574,8 @@ class IdentityStage:
         ax = np.full(n, np.nan)
         ay = np.full(n, np.nan)
         tracked = (self.nh >= 2) & ~self.lostflag
+        with np.errstate(invalid="ignore"):
+            moving = tracked & (model_speed(self.hist_x, self.hist_t) >= STILL_SPEED)
         ax[tracked], ay[tracked] = pred[tracked, 0], pred[tracked, 1]
         amb = (second >= score - p.ambiguity_margin) | (score < p.min_score)
         good = wsel & ~amb
@@ -577,10 +589,27 @@ class IdentityStage:
             cand, d = cand[d <= self.local], d[d <= self.local]
             if cand.size < 2:
                 continue
+            if moving[cand].sum() >= _TRACKED_ANCHORS:
+                # moving markers with a motion model predict better than other wide matches,
+                # which may have moved together onto the next blobs of a regular grid (real
+                # dots, extra DEV seed 32 cam1, frame 2: four dots of a row leaving the view,
+                # with no velocity after a flagged frame 1, took the next dots along their
+                # row and vouched for each other: ok 34 px off). (Still ones - the mount,
+                # the reference dots - would hold a wing marker still.)
+                cand, d = cand[moving[cand]], d[moving[cand]]
             near = cand[np.argsort(d)[:6]]
             pq = _neighbour_prediction(ref[i], ref[near], np.column_stack([ax[near], ay[near]]))
             if pq is None:
-                continue  # the neighbours do not move together: no prediction to trust
+                # the neighbours do not move together: no prediction to trust. A match
+                # further than half the spacing from where the marker was may be a
+                # neighbour's blob, and nothing vouches for it: its point is flagged
+                # (``unvouched``; the match and the conflicts stay as they are). Real dots,
+                # extra DEV seed 21 cam2, frame 1: a dot leaving the view took its grid
+                # neighbour's blob 20 px away, unambiguous, while one of its three
+                # neighbours had done the same: ok 30 px off.
+                if good[k] and math.hypot(mx[k] - pred[i, 0], my[k] - pred[i, 1]) >= 0.5 * self._spacing[i]:
+                    unvouched[i] = True
+                continue
             q, lim = pq
             if good[k]:
                 if math.hypot(mx[k] - q[0], my[k] - q[1]) > lim + 1.0:

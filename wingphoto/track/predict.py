@@ -10,6 +10,21 @@ from .geometry import _nearest_kernel, _nearest_two
 __all__ = ["predict_positions", "shift_history", "start_frame", "update_model"]
 
 
+#: A marker slower than this (px/frame) by its motion model is still (the mount, the
+#: reference dots): it measures and confirms a camera shift
+#: (:meth:`~.glitch.GlitchStage._still_found`), and does not anchor the wide search's
+#: consensus for moving markers (:meth:`~.identity.IdentityStage._consensus`).
+STILL_SPEED = 0.3
+
+
+def model_speed(hist_x, hist_t):
+    """Each marker's speed (px a frame) over the last two points of its motion model's
+    history (NaN without two)."""
+    dt = np.abs(hist_t[:, 0] - hist_t[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.hypot(*(hist_x[:, 0] - hist_x[:, 1]).T) / dt
+
+
 def predict_positions(hx, ht, nh, t):
     """Extrapolate each marker's reliable history to frame ``t``.
 

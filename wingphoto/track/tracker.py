@@ -130,6 +130,11 @@ class FrameContext:
         The moving markers, when the hypothesis chosen for a broken constellation put
         most markers but not most of the moving ones where predicted (else none): their
         points are flagged (:meth:`Tracker._recover`).
+    unvouched : (N,) ndarray of bool
+        Wide-searched markers (no velocity yet) matched further than half their spacing
+        from where they were, whose neighbours did not move together: nothing vouches for
+        the match (:meth:`~.identity.IdentityStage._consensus`); their points are flagged
+        ``ambiguous``.
     shift : (2,) ndarray of float
         The camera's shift (px) measured on this frame (:meth:`Tracker._recover`; zero
         without a bump): the image moved by it besides the markers' own motion.
@@ -167,6 +172,7 @@ class FrameContext:
     sigma: np.ndarray = None
     glitch: bool = False
     unexplained: np.ndarray = None
+    unvouched: np.ndarray = None
     shift: np.ndarray = None
 
     def step_velocity(self, disp):
@@ -482,7 +488,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         RS[self.lostflag] = _R["lost_track"]
         return FrameContext(
             **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged, shift=np.zeros(2),
-            unexplained=np.zeros(n, bool),
+            unexplained=np.zeros(n, bool), unvouched=np.zeros(n, bool),
             nbr_r=self.rd[np.maximum(plan["j2"][:, 0], 0)] + 0.5,
             XP=np.full(n, np.nan), YP=np.full(n, np.nan), S=np.full(n, np.nan), SEC=np.full(n, -2.0),
             lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
@@ -625,6 +631,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             g = (ST == OK) & (True if ctx.glitch else ctx.unexplained)
             ST[g] = FLAGGED
             RS[g] = _R["constellation"]
+        u = (ST == OK) & ctx.unvouched
+        ST[u] = FLAGGED
+        RS[u] = _R["ambiguous"]
 
     def _coincident(self, ctx):
         """Ok markers (boolean) whose refined centre lies within :data:`~.status.COINCIDENT`
