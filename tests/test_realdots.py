@@ -125,3 +125,28 @@ def test_glitches_carry_the_truth_with_them(long_seq):
         realdots.with_glitch(src, "shaken", seed=1)
     with pytest.raises(ValueError, match="render more frames"):
         realdots.with_glitch(src, "dropped", seed=1, n_frames=len(src))
+
+
+def test_glitch_benchmark_writes_one_row_per_sequence(folder, tmp_path):
+    """``benchmarks/track_realdots_glitches.py`` tracks, scores and tables each sequence,
+    and its exit code says whether any ok point was more than 1 px off."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    import pandas as pd
+
+    bench = Path(__file__).resolve().parents[1] / "benchmarks"
+    sys.path.insert(0, str(bench))
+    try:
+        spec = importlib.util.spec_from_file_location("track_realdots_glitches", bench / "track_realdots_glitches.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        out = tmp_path / "t.csv"
+        rc = mod.main(["--seed-list", "1", "--kinds", "none", "bumped", "--frames", "20", "--csv", str(out)])
+    finally:
+        sys.path.remove(str(bench))
+    df = pd.read_csv(out)
+    assert sorted(zip(df.kind, df.camera)) == sorted((k, c) for k in ("none", "bumped") for c in realdots.CAMERAS)
+    assert (df.n_visible > 0).all() and df.ok_share.between(0, 1).all()
+    assert rc == int(df.confident_errors.sum() > 0)
