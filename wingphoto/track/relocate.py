@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import _apply_affine, _robust_affine
+from .predict import STILL_SPEED, model_speed
 from .sigma import sigma_of
 from .status import _R, FLAGGED, OK
 
@@ -351,16 +352,15 @@ def _velocity(prev, frame, pts, radius, half=PATCH_HALF):
 
 def _was_moving(tr, res=None):
     """Markers that were moving when last seen - away from their reference position, or
-    faster than 0.3 px a frame - as :mod:`.reacquire` tells the wing from the static dots
+    faster than ``STILL_SPEED`` - as :mod:`.reacquire` tells the wing from the static dots
     (a static dot hidden by the wing is not fitted with the wing's constellation); with
     the results ``res``, also those written :data:`ROAM_PX` or more from their reference
     position on any frame (a wing marker lost at rest where it was on the reference frame)."""
     p0 = tr.hist_x[:, 0]
     away = np.hypot(p0[:, 0] - tr.ref_pos[:, 0], p0[:, 1] - tr.ref_pos[:, 1]) >= STILL_PX
-    dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1]).astype(float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = np.hypot(*(tr.hist_x[:, 0] - tr.hist_x[:, 1]).T) / dt
-    fast = (tr.nh >= 2) & (dt > 0) & (v >= 0.3)
+    dt = np.abs(tr.hist_t[:, 0] - tr.hist_t[:, 1])
+    with np.errstate(invalid="ignore"):
+        fast = (tr.nh >= 2) & (dt > 0) & (model_speed(tr.hist_x, tr.hist_t) >= STILL_SPEED)
     return away | fast | (False if res is None else _roamed(tr, res))
 
 
