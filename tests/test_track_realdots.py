@@ -79,3 +79,20 @@ def test_dots_leaving_the_view_early_do_not_take_the_next_grid_dot(camera, seed)
     a = point_errors(tr, first, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert a["ok"][:, :].any(axis=1)[1:].all()  # dots are followed
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))
+
+
+@pytest.mark.parametrize("seed", [31, 0])
+def test_a_grid_moved_one_spacing_by_dropped_frames_is_not_followed_on_the_wrong_dots(seed):
+    # three frames dropped while the grid (about 33 px a dot) moved 34-49 px: no glitch
+    # hypothesis explained two frames in a row, and every dot then resumed ok on the dot
+    # one spacing behind it, 33 px off for the rest of the sequence (seed 31: 933 ok
+    # points; seed 0: a dot re-acquired just before, 72 px off). Now the markers that
+    # coasted over two unexplained frames are lost until found again
+    # (GlitchStage._lose_unchecked)
+    base = realdots.render_realdots("cam1", seed=seed, n_frames=65)
+    seq = realdots.with_glitch(base, "dropped", seed=seed, n_frames=60)
+    picks = base.picks("cam1")
+    tr = track_markers(seq.images, picks, camera="cam1", progress=False)
+    a = point_errors(tr, seq, "cam1", points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"][:8].any(axis=1).all()  # followed before the drop

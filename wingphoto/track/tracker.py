@@ -634,6 +634,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         u = (ST == OK) & ctx.unvouched
         ST[u] = FLAGGED
         RS[u] = _R["ambiguous"]
+        g = (ST == OK) & self._relocated_astray(ctx, res)
+        ST[g] = FLAGGED
+        RS[g] = _R["constellation"]
 
     def _coincident(self, ctx):
         """Ok markers (boolean) whose refined centre lies within :data:`~.status.COINCIDENT`
