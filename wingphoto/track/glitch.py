@@ -25,6 +25,7 @@ import numpy as np
 from ..motion import estimate_shift, frame_content
 from .identity import STALL_PX
 from .predict import STILL_SPEED, model_speed, shift_history
+from .relocate import MIN_INLIERS
 from .status import _R, COAST_PX, LOST
 
 logger = logging.getLogger("wingphoto.track")
@@ -277,7 +278,11 @@ class GlitchStage:
 
     def _relocated_astray(self, ctx, res):
         """Markers re-acquired together on their last ok frame whose group, on this frame,
-        is mostly not where predicted (boolean; groups of at least 3 found).
+        is mostly not where predicted (boolean; groups found of at least
+        :data:`~.relocate.MIN_INLIERS`, the fewest a constellation re-acquires: markers
+        re-acquired one by one from their neighbours, three on one frame, were 2-4 px off
+        their predictions on the next and right; flagged, they coasted and one was later
+        followed 16 px off, real dots DEV seed 0 cam2).
 
         A re-acquired marker's motion model starts from one point and a velocity measured
         against the previous image (:func:`~.relocate.relocate_group`); across frames
@@ -290,7 +295,7 @@ class GlitchStage:
         neighbour's blob, 12.5 px off."""
         out = np.zeros(len(ctx.X), bool)
         cand = (ctx.fits & (self.nh < 3)).nonzero()[0]
-        if cand.size < 3:
+        if cand.size < MIN_INLIERS:
             return out
         cand = cand[self._just_reacquired(cand, res)]
         lim = np.maximum(2.0, 2.0 * self.resid_rms)
@@ -298,8 +303,10 @@ class GlitchStage:
             grp = cand[self.last_ok[cand] == t0]
             with np.errstate(invalid="ignore"):
                 near = ctx.resid[grp] <= lim[grp]
-            if grp.size >= 3 and near.sum() < _CONSTELLATION * grp.size:
+            if grp.size >= MIN_INLIERS and near.sum() < _CONSTELLATION * grp.size:
                 out[grp] = True
+                logger.info("markers %s re-acquired on frame %d: %d of %d where predicted: flagged", grp.tolist(),
+                            t0, int(near.sum()), grp.size)
         return out
 
     def _still_found(self, c):
