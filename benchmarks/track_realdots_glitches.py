@@ -42,9 +42,7 @@ def run_one(base, kind, seed, n_frames):
     from wingphoto.validation import score_tracks
 
     if kind == "none":
-        seq = realdots.RealDotSequence(camera=base.camera, images=base.images[:n_frames],
-                                       points=base.points[:n_frames], visible=base.visible[:n_frames],
-                                       homographies=base.homographies[:n_frames], params=dict(base.params))
+        seq = base.head(n_frames)
     else:
         seq = realdots.with_glitch(base, kind, seed=seed, n_frames=n_frames)
     picks = base.picks()

@@ -127,6 +127,15 @@ def test_glitches_carry_the_truth_with_them(long_seq):
         realdots.with_glitch(src, "dropped", seed=1, n_frames=len(src))
 
 
+def test_head_keeps_the_first_frames_and_their_truth(long_seq):
+    h = long_seq.head(4)
+    assert len(h) == 4 and h.camera == long_seq.camera
+    assert np.array_equal(h.images, long_seq.images[:4]) and np.array_equal(h.points, long_seq.points[:4])
+    assert np.array_equal(h.visible, long_seq.visible[:4]) and np.array_equal(h.homographies, long_seq.homographies[:4])
+    with pytest.raises(ValueError, match="n_frames must be between 1 and"):
+        long_seq.head(len(long_seq) + 1)
+
+
 def test_glitch_benchmark_writes_one_row_per_sequence(folder, tmp_path):
     """``benchmarks/track_realdots_glitches.py`` tracks, scores and tables each sequence,
     and its exit code says whether any ok point was more than 1 px off."""

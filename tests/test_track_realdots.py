@@ -73,8 +73,7 @@ def test_dots_leaving_the_view_early_do_not_take_the_next_grid_dot(camera, seed)
     # motion model around them)
     seq = realdots.render_realdots(camera, seed=seed, n_frames=65)  # (65: the sweep's dots)
     picks = seq.picks(camera)
-    first = realdots.RealDotSequence(camera=camera, images=seq.images[:5], points=seq.points[:5],
-                                     visible=seq.visible[:5], homographies=seq.homographies[:5])
+    first = seq.head(5)
     tr = track_markers(first.images, picks, camera=camera, progress=False)
     a = point_errors(tr, first, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert a["ok"][:, :].any(axis=1)[1:].all()  # dots are followed

@@ -84,6 +84,14 @@ class RealDotSequence:
     def __len__(self):
         return self.images.shape[0]
 
+    def head(self, n_frames):
+        """The first ``n_frames`` frames of this sequence, with their truth (a new sequence)."""
+        n = int(n_frames)
+        if not 1 <= n <= len(self):
+            raise ValueError(f"n_frames must be between 1 and {len(self)} (this sequence's length), got {n_frames!r}")
+        return RealDotSequence(camera=self.camera, images=self.images[:n], points=self.points[:n],
+                               visible=self.visible[:n], homographies=self.homographies[:n], params=dict(self.params))
+
     def _check(self, camera):
         if camera != self.camera:
             raise ValueError(f"camera must be {self.camera!r} (this sequence's camera), got {camera!r}")
