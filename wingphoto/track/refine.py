@@ -88,6 +88,13 @@ CLIP_LEVEL = 1.2
 #: the weights are clipped at SHAPE_CLIP of the way from the cut to the face's median
 #: instead (a uniform face, whatever its outline and blur, does not move it).
 SHAPE_CLIP = 0.5
+#: ... and, added in quadrature, SHAPE_BIN_GAIN times how far beyond SHAPE_BIN_FLOOR px it
+#: moves when every pixel above the cut weighs alike (the shape's own centre): a specular
+#: spot drawn by motion blur into a streak over much of a dot is above the clip level
+#: wherever it lies, and clipping hardly moves the centre, while the shape's centre is
+#: where the dot is (real dots cam1, DEV seeds 5, 6, 29, 30: 15 ok points 1.0-1.4 px off
+#: at sigma 0.21-0.25)
+SHAPE_BIN_GAIN, SHAPE_BIN_FLOOR = 1.0, 0.2
 #: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
 #: CONTRAST_FACE times its face - the median of its disk pixels above CONTRAST_FLOOR of the
 #: peak (and 3 noise sigmas). A small bright highlight on a dim face (real dots: a specular
@@ -291,6 +298,10 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         # brightness (texture, a highlight) - a bias the noise does not tell
         ds = (wflat @ grid.gxy) / wflat.sum(1)[:, None]
         dshape = np.hypot(ds[:, 0] - d[:, 0], ds[:, 1] - d[:, 1])
+        # ... and when every weighted pixel weighs alike (the shape's centre)
+        db = (supp @ grid.gxy) / supp.sum(1)[:, None]
+        mb = np.hypot(db[:, 0] - d[:, 0], db[:, 1] - d[:, 1])
+        dshape = np.hypot(dshape, SHAPE_BIN_GAIN * np.maximum(np.nan_to_num(mb) - SHAPE_BIN_FLOOR, 0.0))
         # ... and when the background under the disk is curved (background.QUAD_MIN)
         okq = (rin.sum(1) >= QUAD_MIN) & (bgres > QUAD_BGRES)
         if okq.any():
@@ -639,6 +650,8 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
         q = suu - 2.0 * dx * su + nw * dx * dx + svv - 2.0 * dy * sv + nw * dy * dy
         spread = np.sqrt(0.5 * max(q, 0.0)) / sw
         dshape = np.hypot(fwx / fw - dx, fwy / fw - dy) if fw > 0 else 0.0
+        mb = np.hypot(su / nw - dx, sv / nw - dy)
+        dshape = np.hypot(dshape, SHAPE_BIN_GAIN * max(mb - SHAPE_BIN_FLOOR, 0.0))
         if qw > 0:
             dshape = np.hypot(dshape, np.hypot(qwx / qw - dx, qwy / qw - dy))
         if w5s > 0:
