@@ -13,7 +13,9 @@ Independent terms, added in quadrature:
   in quadrature, when the background under the disk follows the ring's curvature
   instead of its plane (:data:`~.background.QUAD_MIN`: a marker at the membrane's edge,
   whose plane tilts towards the dark side - the ~1 px confident errors at sigma
-  0.2-0.25 of extra DEV seed 11), beyond the ~0.03 px a uniform marker shows;
+  0.2-0.25 of extra DEV seed 11), and, beyond :data:`~.refine.SHAPE_BIN_FLOOR`, when
+  every weighted pixel weighs alike (the shape's own centre: a highlight streaked over a
+  small dot, real dots cam1), beyond the ~0.03 px a uniform marker shows;
 * texture: the inner face's brightness variation beyond the pixel noise (``tex``: painted
   stripes, a specular highlight), which biases the centre by a fixed, marker-specific
   amount the noise terms do not see;
