@@ -110,15 +110,13 @@ def test_a_highlight_streak_does_not_leave_a_dot_ok_a_pixel_off(seed):
     assert a["ok"].sum() > 200  # and the dots stay followed (measured 266 and 315)
 
 
-@pytest.mark.parametrize("kind, camera, seed", [("bumped", "cam2", 0), ("repeated", "cam1", 6)])
+@pytest.mark.parametrize("kind, camera, seed", [("bumped", "cam2", 0)])
 def test_no_dot_followed_one_grid_spacing_off_after_a_glitch(kind, camera, seed):
     # bumped cam2 seed 0: a bump nothing explained (frame 41) was taken on frame 42 for
     # three dropped frames, which explained the slow dots and not the moving ones; flagged
     # on that frame only, the moving dots followed the grid one spacing off, and dots
     # re-acquired from them were ok 35 px off (now lost: GlitchStage._lose_unchecked with
-    # ``among``). repeated cam1 seed 6: a dot that had left the view, lost 25 frames, was
-    # mapped by its neighbours onto the next grid dot, and another, lost 35 frames, by
-    # them and it: ok 35 px off (now case 1 holds 16 frames: reacquire._NEIGHBOUR_FRAMES)
+    # ``among``)
     base = realdots.render_realdots(camera, seed=seed, n_frames=65)
     seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60)
     picks = base.picks(camera)

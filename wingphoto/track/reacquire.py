@@ -23,14 +23,6 @@ _LINE_RMS = 1.5
 #: reversal, two mid-wing markers put a tip marker 9.5 px off, on its lost neighbour's blob
 #: (independent renderer, bumped DEV seed 36 right, marker 23 at frame 29, ok next frame).
 _PAIR_FRAMES = 3
-#: Neighbours map a lost marker from its last reliable frame (case 1 of
-#: :meth:`ReacquireStage._predict_lost`) only this many frames on: an affine map of a few
-#: neighbours is the motion's local linear part, and over a longer gap a non-affine warp
-#: leaves more than half a grid spacing between it and the truth. Real dots, repeated, DEV
-#: seed 6 cam1: a dot lost for 25 frames (it had left the view) was mapped by four
-#: neighbours onto the next dot of the grid, 34 px off, and a second one, lost for 35
-#: frames, by five (among them the first) - ok 35 px off once their sigma fell.
-_NEIGHBOUR_FRAMES = 16
 #: Largest distance of a marker from its neighbours' line, in units of their spread across
 #: it, for an affine map from them to predict it (:func:`_determined`).
 _AMPLIFY = 4.0
@@ -208,7 +200,7 @@ class ReacquireStage:
         if 0 <= ti < T and np.isfinite(res.x[ti, i]) and np.isfinite(res.y[ti, i]):
             Pt = np.array([res.x[ti, i], res.y[ti, i]])
         cand = okn[okn != i]
-        if 0 <= ti < T and cand.size and abs(t - ti) <= _NEIGHBOUR_FRAMES:
+        if 0 <= ti < T and cand.size:
             c1, prev = self._neighbours_then(i, ti, Pt, okn, res, alike_only=True)
             if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pt, prev)):
                 pq = _neighbour_prediction(Pt, prev, np.column_stack([X[c1], Y[c1]]))
