@@ -283,9 +283,9 @@ class GlitchStage:
         confirm one, and their phase correlation is weak) loses the dots too, where before
         they resumed on their own dots - a bump of a few px is far from a grid spacing,
         but nothing on the frame tells it from the dropped frames above (the dots were
-        found 4-6 px from their predictions in both). 41 real-dot DEV seeds, bumped: ok
-        share 40.6 -> 36.7 % (cam1), 27.5 -> 23.6 % (cam2), no confident error either way
-        but the highlight points."""
+        found 4-6 px from their predictions in both). 41 real-dot DEV seeds, bumped, this
+        check alone: ok share 40.6 -> 36.7 % (cam1), 27.5 -> 23.6 % (cam2), no confident
+        error either way but the highlight points."""
         with np.errstate(invalid="ignore"):
             still = (self.nh >= 3) & (model_speed(self.hist_x, self.hist_t) < STILL_SPEED)
         stale = ~still & (self.nh >= 1) & (ctx.gap >= 2) & ~self.lostflag
@@ -293,8 +293,8 @@ class GlitchStage:
             stale &= among
         if stale.any():
             self.lostflag |= stale
-            logger.info("frame %d: %d markers not known to be still coasted over two unexplained frames: lost "
-                        "until found again", t, int(stale.sum()))
+            logger.info("frame %d: %d markers not known to be still, unexplained on this frame and the one "
+                        "before: lost until found again", t, int(stale.sum()))
 
     def _relocated_astray(self, ctx, res):
         """Markers re-acquired together on their last ok frame whose group, on this frame,
