@@ -146,7 +146,7 @@ def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False):
     return M, rms, int(keep.sum())
 
 
-def _neighbour_prediction(p0, prev, now, min_m=2, reach=False):
+def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.inf):
     """Where a marker at ``p0`` moved to, from neighbours that moved from ``prev`` to ``now``.
 
     ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
@@ -157,7 +157,8 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False):
     displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
     (px), or None when the neighbours do not move together. With ``reach``, the mean
     displacement's tolerance also grows with how far the marker is from the group times
-    how differently the group moved (:func:`_reach`).
+    how differently the group moved (:func:`_reach`). A mean displacement that may miss
+    the marker by more than ``max_reach`` px (:func:`_reach`) predicts nothing.
     """
     m = len(prev)
     if m >= 4:
@@ -175,8 +176,12 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False):
         return None
     dm = D[alike[j]].mean(0)
     lim = 2.0 + 0.1 * math.hypot(*dm)
-    if reach:
-        lim += _reach(p0, prev[alike[j]], D[alike[j]])
+    if reach or max_reach < math.inf:
+        miss = _reach(p0, prev[alike[j]], D[alike[j]])
+        if miss > max_reach:
+            return None
+        if reach:
+            lim += miss
     return p0 + dm, lim
 
 

@@ -23,6 +23,10 @@ _LINE_RMS = 1.5
 #: reversal, two mid-wing markers put a tip marker 9.5 px off, on its lost neighbour's blob
 #: (independent renderer, bumped DEV seed 36 right, marker 23 at frame 29, ok next frame).
 _PAIR_FRAMES = 3
+#: A mean displacement of neighbours predicts a lost marker from its last reliable frame
+#: only if it may miss it (:func:`~.geometry._reach`) by at most this share of the
+#: marker's distance to its nearest neighbour.
+_REACH_SPACING = 0.25
 #: Largest distance of a marker from its neighbours' line, in units of their spread across
 #: it, for an affine map from them to predict it (:func:`_determined`).
 _AMPLIFY = 4.0
@@ -90,6 +94,17 @@ def _line_prediction(p0, src, dst, max_off):
     if rms > _LINE_RMS:
         return None
     return coef[0] + coef[1] * s0
+
+
+def _last_written(res, i, ti, t_ok):
+    """The last frame, from ``ti`` back to ``t_ok`` (marker ``i``'s last ok frame), on
+    which a position of marker ``i`` is written in ``res``, or None."""
+    T = res.x.shape[0]
+    step = 1 if t_ok <= ti else -1
+    for tw in range(ti, t_ok - step, -step):
+        if 0 <= tw < T and np.isfinite(res.x[tw, i]) and np.isfinite(res.y[tw, i]):
+            return tw
+    return None
 
 
 #: A marker flagged ``imprecise`` serves as a neighbour for re-acquisition only if it was
@@ -173,7 +188,6 @@ class ReacquireStage:
         (:meth:`_reacquire`).
         """
         p = self.p
-        T = res.x.shape[0]
         ref = self.ref_pos
         if self.nh[i] < 2:
             # a marker whose motion was never seen (lost since its pick), beside both still
@@ -196,14 +210,25 @@ class ReacquireStage:
         # or a dropped frame, Tracker._set_model; mixed with the neighbours' rows it put two
         # markers of a row a bump's 7.5 px off, on their neighbours' blobs: bumped DEV seed
         # 93 right, markers 20 and 21, under a looser edge rule not kept)
-        Pt = Pi
-        if 0 <= ti < T and np.isfinite(res.x[ti, i]) and np.isfinite(res.y[ti, i]):
-            Pt = np.array([res.x[ti, i], res.y[ti, i]])
+        # No row written there (it coasted out of the frame, or was lost): the last frame
+        # with one, never the model's copy - a repeated frame moves that copy back along
+        # its motion while ti stays (GlitchStage._set_model): a dot coasting out of view,
+        # moved back three frames by three repeated frames, was mapped 25 frames later to
+        # where it had been three frames before it left - onto the next dot of the grid,
+        # ok 35 px off and a wrong neighbour for two more (real dots, repeated, DEV seed 6
+        # cam1)
+        ti = _last_written(res, i, ti, int(self.last_ok[i]))
+        Pt = None if ti is None else np.array([res.x[ti, i], res.y[ti, i]])
         cand = okn[okn != i]
-        if 0 <= ti < T and cand.size:
+        if Pt is not None and cand.size:
             c1, prev = self._neighbours_then(i, ti, Pt, okn, res, alike_only=True)
             if (c1.size >= 3 or (c1.size == 2 and abs(t - ti) <= _PAIR_FRAMES)) and (c1.size < 4 or _determined(Pt, prev)):
-                pq = _neighbour_prediction(Pt, prev, np.column_stack([X[c1], Y[c1]]))
+                # (a mean displacement that may miss it by a quarter of its spacing
+                # predicts nothing: three neighbours 100 px from a dot of a rotating grid,
+                # 23 frames on, moved it 34 px from where it was, onto the next dot -
+                # real dots, dropped, DEV seed 101 cam1 - which took the next one's)
+                pq = _neighbour_prediction(Pt, prev, np.column_stack([X[c1], Y[c1]]),
+                                           max_reach=_REACH_SPACING * float(self._spacing[i]))
                 if pq is not None:
                     logger.debug("frame %d: marker %d predicted from its neighbours on frame %d %s", t, i, ti,
                                  c1.tolist())
@@ -252,7 +277,7 @@ class ReacquireStage:
         if nbr.size >= 2:
             return None
         q = Pi.copy()
-        if nbr.size == 1 and 0 <= ti < T and res.status[ti, nbr[0]] == OK:
+        if nbr.size == 1 and Pt is not None and res.status[ti, nbr[0]] == OK:
             j = nbr[0]
             q = Pt + (X[j] - res.x[ti, j], Y[j] - res.y[ti, j])
         return q, p.search_radius, max(p.reacquire_score, 0.9), nbr
