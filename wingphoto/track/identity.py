@@ -351,11 +351,10 @@ class IdentityStage:
         d = np.hypot(prev[:, 0] - Pi[0], prev[:, 1] - Pi[1])
         keep = d <= self.local
         cand, prev, d = cand[keep], prev[keep], d[keep]
-        # (its velocity over its motion model's last interval, which need not end on ti)
-        t0, t1 = int(self.hist_t[i, 0]), int(self.hist_t[i, 1])
-        if cand.size >= 2 and self.nh[i] >= 2 and t1 != t0:
-            vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(t0 - t1)
-            tb = ti - (1 if t1 < t0 else -1)
+        t1 = int(self.hist_t[i, 1])
+        if cand.size >= 2 and self.nh[i] >= 2 and t1 != ti:
+            vi = (self.hist_x[i, 0] - self.hist_x[i, 1]) / abs(ti - t1)
+            tb = ti - (1 if t1 < ti else -1)
             if 0 <= tb < T:
                 vj = prev - np.column_stack([res.x[tb, cand], res.y[tb, cand]])
                 same = np.hypot(vj[:, 0] - vi[0], vj[:, 1] - vi[1]) <= 1.0 + 0.3 * math.hypot(*vi)
