@@ -134,3 +134,25 @@ def test_no_dot_followed_one_grid_spacing_off_after_a_glitch(kind, camera, seed)
     a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert not (a["error"][a["ok"]] > 3.0).any(), np.argwhere(a["ok"] & (a["error"] > 3.0))[:10]
     assert a["ok"][:8].any(axis=1).all()  # followed before the glitch
+
+
+@pytest.mark.parametrize("camera, seed, run", [("cam1", 13, 3), ("cam2", 26, 4)])
+def test_a_reversal_after_unseen_dropped_frames_is_not_taken_for_a_repeat(camera, seed, run):
+    # source frames 5-7 (cam1 seed 13) or 10-13 (cam2 seed 26) dropped just before the
+    # stroke reversed: the drop passed unseen, the dots came back 2-3 px against a
+    # prediction 7 px on, and "a repeated frame" (the history one frame back) put them
+    # within the motion model's limit; kept for two frames, it left the model a stroke
+    # behind, and the next frame put the grid one spacing off (seed 13: ok 35-72 px off;
+    # seed 26: 139 points ok up to 70 px off). A repeat leaves no marker behind where it
+    # was: GlitchStage._repeat_holds
+    base = realdots.render_realdots(camera, seed=seed, n_frames=68)
+    start = {13: 5, 26: 10}[seed]
+    keep = np.flatnonzero(~np.isin(np.arange(len(base)), np.arange(start, start + run)))[:60]
+    seq = realdots.RealDotSequence(camera=camera, images=base.images[keep], points=base.points[keep],
+                                   visible=base.visible[keep], homographies=base.homographies[keep],
+                                   params=dict(base.params))
+    picks = base.picks(camera)
+    tr = track_markers(seq.images, picks, camera=camera, progress=False)
+    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    assert not (a["error"][a["ok"]] > 3.0).any(), np.argwhere(a["ok"] & (a["error"] > 3.0))[:10]
+    assert a["ok"][:start].any(axis=1).all()  # followed before the drop
