@@ -150,3 +150,23 @@ def test_sigma_says_when_a_highlight_streak_pulls_the_centre(use_numba):
     for name in ("uniform", "centred spot"):
         err, sig = out[name]
         assert err < 0.15 and sig < 0.15, out
+
+
+def test_persistent_imprecision_flags_the_dip_not_a_lone_spike():
+    from wingphoto.track.sigma import flag_persistent_imprecision
+    from wingphoto.track.status import _R, FLAGGED, OK
+
+    sig = np.array([[0.30, 0.10], [0.40, 0.10], [0.22, 2.00], [0.35, 0.10], [0.30, 0.10], [np.nan, 0.10],
+                     [np.nan, 0.10]])
+    status = np.full(sig.shape, OK, np.int8)
+    status[[0, 1, 3, 4], 0] = FLAGGED  # marker 0: imprecise on every frame but one dip to 0.22
+    reason = np.zeros(sig.shape, np.int8)
+    n = flag_persistent_imprecision(status, reason, sig, 0.25)
+    assert n == 1 and status[2, 0] == FLAGGED and reason[2, 0] == _R["imprecise"]
+    # marker 1: one frame at sigma 2 (capped at 0.5) among 0.1s flags no neighbour of it;
+    # the spike itself stays as the tracker judged it (ok here: only ok points change)
+    assert (status[:, 1] == OK).all()
+    # a lone frame (no other finite sigma in its window) is left as it is
+    lone = np.array([[0.2], [np.nan], [np.nan], [np.nan], [np.nan]])
+    st = np.full(lone.shape, OK, np.int8)
+    assert flag_persistent_imprecision(st, np.zeros_like(st), lone, 0.15) == 0

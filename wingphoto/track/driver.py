@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from .audit import audit_against_picks
+from .sigma import flag_persistent_imprecision
 from .checkpoint import (
     _WAY_OUT,
     _Checkpointer,
@@ -387,6 +388,11 @@ class _Run:
         if n:
             logger.info("%d ok point-frames flagged 'misplaced': away from where their neighbours' map from the "
                         "picks puts them", n)
+        # (after the audit, whose judges are the ok points as the tracker left them)
+        n = flag_persistent_imprecision(out.status, out.reason, out.sigma, self.p.max_sigma)
+        if n:
+            logger.info("%d ok point-frames flagged 'imprecise': their marker's sigma over the frames around "
+                        "exceeds max_sigma", n)
         return out
 
 
