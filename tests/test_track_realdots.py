@@ -1,4 +1,6 @@
 """Tracking real dot texture (``wingphoto.synth.realdots``): skipped without ../shared."""
+import logging
+
 import numpy as np
 import pytest
 
@@ -159,3 +161,22 @@ def test_a_reversal_after_unseen_dropped_frames_is_not_taken_for_a_repeat(camera
     a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert not (a["error"][a["ok"]] > 3.0).any(), np.argwhere(a["ok"] & (a["error"] > 3.0))[:10]
     assert a["ok"][:start].any(axis=1).all()  # followed before the drop
+
+
+def test_a_hypothesis_must_explain_most_markers_checkable_as_predicted(caplog):
+    # source frames 10-13 dropped (cam1 seed 53): 22 dots checkable as predicted, 1 where
+    # predicted; "6 frames dropped" sent most predictions off the image or off any blob
+    # and won on 4 of the 7 it left checkable: a dot ok on the next dot of the grid, 34 px
+    # off (hidden since by sigma.flag_persistent_imprecision, hence the log check)
+    base = realdots.render_realdots("cam1", seed=53, n_frames=68)
+    keep = np.flatnonzero(~np.isin(np.arange(len(base)), np.arange(10, 14)))[:60]
+    seq = realdots.RealDotSequence(camera="cam1", images=base.images[keep], points=base.points[keep],
+                                   visible=base.visible[keep], homographies=base.homographies[keep],
+                                   params=dict(base.params))
+    picks = base.picks("cam1")
+    with caplog.at_level(logging.INFO, logger="wingphoto.track"):
+        tr = track_markers(seq.images, picks, camera="cam1", progress=False)
+    assert "frame 10: constellation restored" not in caplog.text
+    a = point_errors(tr, seq, "cam1", points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+
