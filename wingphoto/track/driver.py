@@ -114,7 +114,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         the refinement moved the click by more than 1.5 px, or saw a foreign blob or a
         rough background; the click is kept), ``foreign`` (something bright not
         explained by a known marker touches the disk), ``imprecise`` (``sigma`` above
-        ``max_sigma``), ``blank`` (a blank frame: black, saturated, constant),
+        ``max_sigma`` on the frame, or on average on the frames around it), ``blank`` (a blank frame: black, saturated, constant),
         ``constellation`` (most markers left their predictions at once and no glitch - a
         dropped or repeated frame, a camera bump - explains it), ``misplaced`` (after
         tracking: away from where its neighbours' affine map from the picks puts it,
