@@ -166,6 +166,13 @@ def test_persistent_imprecision_flags_the_dip_not_a_lone_spike():
     # marker 1: one frame at sigma 2 (capped at 0.5) among 0.1s flags no neighbour of it;
     # the spike itself stays as the tracker judged it (ok here: only ok points change)
     assert (status[:, 1] == OK).all()
+    # a marker whose frames around average just above max_sigma (0.26): its ok point at
+    # 0.24 stays ok, one that dips to 0.15 (below 0.7 of their mean) is flagged
+    around = np.array([[0.26], [0.26], [0.24], [0.26], [0.26]])
+    for own, flagged in ((0.24, False), (0.15, True)):
+        around[2, 0] = own
+        st = np.array([[FLAGGED], [FLAGGED], [OK], [FLAGGED], [FLAGGED]], np.int8)
+        assert flag_persistent_imprecision(st, np.zeros_like(st), around, 0.25) == int(flagged)
     # a lone frame (no other finite sigma in its window) is left as it is
     lone = np.array([[0.2], [np.nan], [np.nan], [np.nan], [np.nan]])
     st = np.full(lone.shape, OK, np.int8)
