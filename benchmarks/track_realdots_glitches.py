@@ -1,10 +1,11 @@
 """Measure the tracker on real-dot sequences with recording glitches (:func:`wingphoto.synth.realdots.with_glitch`).
 
 ``python benchmarks/track_realdots_glitches.py [--set dev|test] [--seed-list S ...] [--kinds KIND ...]
-[--frames N] [--csv FILE]``
+[--dropped-runs START:LENGTH ...] [--frames N] [--csv FILE]``
 
 For every seed, camera (cam1, cam2) and kind (``none``: the sequence as rendered, and the
-glitches ``dropped``, ``repeated``, ``black``, ``bumped``) renders a real-dot sequence
+glitches ``dropped``, ``repeated``, ``black``, ``bumped``; or, with ``--dropped-runs``,
+``dropped`` with exactly those runs of source frames left out) renders a real-dot sequence
 (:func:`~wingphoto.synth.realdots.render_realdots`, 256 x 256, the sweep's warp), puts
 the glitch in, tracks it with ``wingphoto.track_markers`` (default options) from its
 frame-0 picks and scores the picked points against the truth
@@ -35,8 +36,9 @@ from track_sweep import versions  # noqa: E402  (one place for the versions line
 KINDS = ("none",) + ("dropped", "repeated", "black", "bumped")
 
 
-def run_one(base, kind, seed, n_frames):
-    """Glitch, track and score one sequence; returns a dict (one CSV row)."""
+def run_one(base, kind, seed, n_frames, run=None):
+    """Glitch, track and score one sequence; returns a dict (one CSV row). ``run``
+    (start, length): ``kind`` 'dropped' with exactly that run of source frames left out."""
     from wingphoto import track_markers
     from wingphoto.synth import realdots
     from wingphoto.validation import score_tracks
@@ -44,10 +46,11 @@ def run_one(base, kind, seed, n_frames):
     if kind == "none":
         seq = base.head(n_frames)
     else:
-        seq = realdots.with_glitch(base, kind, seed=seed, n_frames=n_frames)
+        seq = realdots.with_glitch(base, kind, seed=seed, n_frames=n_frames, dropped_run=run)
     picks = base.picks()
     picked = np.flatnonzero(np.all(np.isfinite(picks), axis=1))
-    row = dict(kind=kind, camera=base.camera, seed=seed, glitch=str(seq.params.get("glitch", "")))
+    label = kind if run is None else f"dropped {run[0]}:{run[1]}"
+    row = dict(kind=label, camera=base.camera, seed=seed, glitch=str(seq.params.get("glitch", "")))
     t0 = time.perf_counter()
     try:
         tr = track_markers(seq.frames(), picks, camera=seq.camera, progress=False)
@@ -70,8 +73,18 @@ def main(argv=None):
     ap.add_argument("--seed-list", type=int, nargs="*", default=None, help="seeds (default: the set's)")
     ap.add_argument("--kinds", nargs="*", default=list(KINDS), choices=KINDS)
     ap.add_argument("--frames", type=int, default=60, help="frames delivered per sequence (default 60)")
+    ap.add_argument("--dropped-runs", nargs="*", default=[], metavar="START:LENGTH",
+                    help="instead of --kinds, 'dropped' with exactly these runs of source frames left out, "
+                         "one sequence per run (e.g. 5:3 10:4: a run before a stroke reversal passes unseen)")
     ap.add_argument("--csv", default=None, help="one row per sequence (default: none written)")
     args = ap.parse_args(argv)
+    try:
+        runs = [tuple(int(v) for v in r.split(":")) for r in args.dropped_runs]
+        if any(len(r) != 2 for r in runs):
+            raise ValueError
+    except ValueError:
+        ap.error(f"--dropped-runs takes START:LENGTH pairs of integers (e.g. 5:3), got {args.dropped_runs}")
+    jobs = [("dropped", r) for r in runs] if runs else [(k, None) for k in args.kinds]
     logging.basicConfig(level=logging.ERROR)  # the tracker's per-sequence warnings (NaN picks) are expected
     try:
         realdots.render_realdots("cam1", seed=0, n_frames=2, size=64)
@@ -84,13 +97,13 @@ def main(argv=None):
     for seed in seeds:
         for cam in realdots.CAMERAS:
             base = realdots.render_realdots(cam, seed=seed, n_frames=args.frames + realdots.GLITCH_SPARE)
-            for kind in args.kinds:
-                r = run_one(base, kind, seed, args.frames)
+            for kind, run in jobs:
+                r = run_one(base, kind, seed, args.frames, run)
                 rows.append(r)
                 if r["crash"]:
-                    print(f"{kind:9s} {cam} seed {seed:4d}: CRASH {r['crash']}", flush=True)
+                    print(f"{r['kind']:9s} {cam} seed {seed:4d}: CRASH {r['crash']}", flush=True)
                 else:
-                    print(f"{kind:9s} {cam} seed {seed:4d}: ok {r['ok_share']:.3f}  RMS {r['rms_px']:.3f}  "
+                    print(f"{r['kind']:9s} {cam} seed {seed:4d}: ok {r['ok_share']:.3f}  RMS {r['rms_px']:.3f}  "
                           f"worst {r['worst_px']:.2f}  confident errors {r['confident_errors']}  {r['glitch']}",
                           flush=True)
     df = pd.DataFrame(rows)

@@ -275,7 +275,7 @@ def render_realdots(camera, *, seed, n_frames=None, size=256, folder=None, peak_
                            homographies=Hs, params=params)
 
 
-def with_glitch(seq, kind, *, seed, n_frames=None):
+def with_glitch(seq, kind, *, seed, n_frames=None, dropped_run=None):
     """A copy of a real-dot sequence with a recording glitch in it, the truth following.
 
     Parameters
@@ -294,6 +294,10 @@ def with_glitch(seq, kind, *, seed, n_frames=None):
         Chooses where the glitch falls and the bump's shift.
     n_frames : int, optional
         Frames delivered (default ``len(seq) - GLITCH_SPARE``).
+    dropped_run : (int, int), optional
+        For ``'dropped'`` only: leave out exactly the source frames ``start`` to
+        ``start + length - 1`` instead (``length`` at most ``GLITCH_SPARE``): a stress
+        test of where a run falls (before a stroke reversal it passes unseen).
 
     Returns
     -------
@@ -305,7 +309,8 @@ def with_glitch(seq, kind, *, seed, n_frames=None):
     Raises
     ------
     ValueError
-        Unknown ``kind``, or ``seq`` too short for ``n_frames``.
+        Unknown ``kind``, ``seq`` too short for ``n_frames``, or a ``dropped_run`` that does
+        not fit.
     """
     if kind not in GLITCHES:
         raise ValueError(f"kind must be one of {list(GLITCHES)}, got {kind!r}")
@@ -317,12 +322,20 @@ def with_glitch(seq, kind, *, seed, n_frames=None):
     img, pts, vis = np.array(seq.images), np.array(seq.points, float), np.array(seq.visible)
     src = np.arange(n_out)
     info = {"kind": kind}
+    if dropped_run is not None:
+        start, length = (int(v) for v in dropped_run)
+        if kind != "dropped" or not (1 <= start and 1 <= length <= GLITCH_SPARE and start + length <= n_out):
+            raise ValueError(f"dropped_run (start, length) needs kind 'dropped', 1 <= start, 1 <= length <= "
+                             f"{GLITCH_SPARE} and start + length <= n_frames ({n_out}); got {kind!r}, {dropped_run}")
     if kind == "dropped":
         keep = np.ones(n_out + GLITCH_SPARE, bool)
-        keep[rng.choice(np.arange(5, n_out - 8), 2, replace=False)] = False
-        free = np.flatnonzero(keep[5:-6]) + 5
-        start = int(rng.choice(free[np.isin(free + 1, free) & np.isin(free + 2, free)]))
-        keep[start:start + 3] = False
+        if dropped_run is not None:
+            keep[start:start + length] = False
+        else:
+            keep[rng.choice(np.arange(5, n_out - 8), 2, replace=False)] = False
+            free = np.flatnonzero(keep[5:-6]) + 5
+            start = int(rng.choice(free[np.isin(free + 1, free) & np.isin(free + 2, free)]))
+            keep[start:start + 3] = False
         src = np.flatnonzero(keep)[:n_out]
         info["dropped_source_frames"] = np.flatnonzero(~keep).tolist()
     elif kind == "repeated":
