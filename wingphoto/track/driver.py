@@ -10,7 +10,6 @@ import numpy as np
 import pandas as pd
 
 from .audit import audit_against_picks
-from .sigma import flag_persistent_imprecision
 from .checkpoint import (
     _WAY_OUT,
     _Checkpointer,
@@ -21,6 +20,7 @@ from .checkpoint import (
 from .inputs import _Frames, _parse_picks
 from .options import TrackOptions
 from .results import _merge_backward, _Results, _tracks_frame
+from .sigma import flag_persistent_imprecision
 from .status import _R, FLAGGED, LOST, OK
 from .tracker import Tracker as _Tracker
 

@@ -193,6 +193,12 @@ def _associate(mapped, cand, tree, tol):
     return out
 
 
+def _affine_lstsq(src, dst):
+    """(3, 2) least-squares affine map: ``[x y 1] @ X`` approximates ``dst``."""
+    X, *_ = np.linalg.lstsq(np.column_stack([src, np.ones(len(src))]), dst, rcond=None)
+    return X
+
+
 def _refine_fit(ref, cand, tree, M, tol):
     """Iterate association and fit from affine ``M``: a few affine rounds at ``tol``, then a
     homography at :data:`FIT_TOL`. Returns (assignment (n,), mapped (n, 2), rms)."""
@@ -202,8 +208,7 @@ def _refine_fit(ref, cand, tree, M, tol):
         m = a >= 0
         if m.sum() < 3:
             return a, mapped, np.inf
-        A = np.column_stack([ref[m], np.ones(m.sum())])
-        X, *_ = np.linalg.lstsq(A, cand[a[m]], rcond=None)
+        X = _affine_lstsq(ref[m], cand[a[m]])
         mapped = np.column_stack([ref, np.ones(len(ref))]) @ X
         a2 = _associate(mapped, cand, tree, max(FIT_TOL, 0.5 * tol))
         if np.array_equal(a2, a):
@@ -311,12 +316,12 @@ def fit_constellation(ref, cand, *, n_keep=8):
     for i, f in enumerate(fits):
         if i != b and np.median(np.hypot(*(f[1] - mp).T)) >= 0.33 * spacing:
             second = max(second, key[i][0])
-    second = max(second, _alias_inliers(ref, cand, ctree, a, tol))
+    second = max(second, _alias_inliers(ref, cand, rtree, ctree, a, tol))
     return {"assign": a, "mapped": mp, "inliers": int((a >= 0).sum()), "rms": rms, "second": second,
             "spacing": spacing}
 
 
-def _alias_inliers(ref, cand, tree, a, tol):
+def _alias_inliers(ref, cand, rtree, tree, a, tol):
     """The most inliers of the best fit's aliases: the group moved by one step to a
     reference neighbour (each of the six nearest to its central point), refined.
 
@@ -329,11 +334,9 @@ def _alias_inliers(ref, cand, tree, a, tol):
     m = a >= 0
     if m.sum() < 3:
         return 0
-    A = np.column_stack([ref[m], np.ones(m.sum())])
-    X, *_ = np.linalg.lstsq(A, cand[a[m]], rcond=None)  # the best fit's affine (3, 2)
+    X = _affine_lstsq(ref[m], cand[a[m]])  # the best fit's affine
     centre = int(np.argmin(np.hypot(*(ref - np.median(ref, axis=0)).T)))
-    k = min(7, len(ref))
-    _, nn = cKDTree(ref).query(ref[centre], k=k)
+    _, nn = rtree.query(ref[centre], k=min(7, len(ref)))
     best = 0
     for j in np.atleast_1d(nn)[1:].tolist():
         step = ref[j] - ref[centre]
