@@ -723,12 +723,19 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             # another blob: it does not feed the model (black DEV seed 61 left: after a
             # jump, a marker ran 68-172 px off for 50 frames, fed by its own imprecise
             # positions, and misled re-acquisition onto a neighbour's blob)
-            dis = imp[self._disputed(imp, res, t)]
+            hop = self._hopped(imp, res, t, now=(X, Y))
+            dis = imp[self._disputed(imp, res, t) | hop]
             if dis.size:
                 rel[dis] = False
                 # unless its neighbours vouch for it: a real dot falsely flagged 'jump'
                 # at a reversal then coasted off its dot, lost, and was found 12 px off
-                rel[self._inconsistent(dis, X, Y, ST, res, t, since="fed")] = True
+                vouched = self._inconsistent(dis, X, Y, ST, res, t, since="fed")
+                rel[vouched] = True
+                # an imprecise path that hopped onto another blob, unvouched, is no
+                # anchor for re-acquisition either ('jump')
+                hopped = imp[hop]
+                hopped = hopped[~rel[hopped]]
+                RS[hopped] = _R["jump"]
         if ctx.glitch or ctx.aged < 0:
             rel[:] = False  # nothing new: an unexplained frame, or a repeat of the last one
         held = self._poor_match(S, ctx.sigma)  # (before the model moves the running score)
