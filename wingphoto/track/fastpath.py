@@ -400,8 +400,8 @@ def _build(key):
                 return 9
             if ST[i] == FLAGGED and RS[i] == _IMPRECISE and abs(t - last_ok[i]) > 1:
                 return 9  # it may have been disputed since (Tracker._update reads the rows)
-            if ST[i] == OK and (abs(t - last_ok[i]) > 1 or nh[i] < 3) and not stay:
-                return 9
+            if ST[i] == OK and (abs(t - last_ok[i]) > 1 or (nh[i] < 3 and not stay)):
+                return 9  # (after a gap even a marker that stayed: was its blob disputed?)
         for i in range(n):
             if inside[i] and not fits[i]:  # an edge marker (Tracker._judge)
                 if (mass[i] > fpar[0] * mass0[i] and X[i] >= -0.5 and X[i] <= W - 0.5 and Y[i] >= -0.5
