@@ -98,11 +98,15 @@ def _line_prediction(p0, src, dst, max_off):
 
 def _last_written(res, i, ti, t_ok):
     """The last frame, from ``ti`` back to ``t_ok`` (marker ``i``'s last ok frame), on
-    which a position of marker ``i`` is written in ``res``, or None."""
+    which a position of marker ``i`` is written in ``res`` whose identity was not in doubt
+    (ok, ``imprecise`` or ``edge``), or None. (A position flagged ``ambiguous`` one grid
+    spacing off, on the frame after the pick, mapped 27 frames later onto the next dot:
+    real dots, repeated, fresh DEV seed 236 cam2, ok 34-36 px off.)"""
     T = res.x.shape[0]
     step = 1 if t_ok <= ti else -1
     for tw in range(ti, t_ok - step, -step):
-        if 0 <= tw < T and np.isfinite(res.x[tw, i]) and np.isfinite(res.y[tw, i]):
+        if 0 <= tw < T and np.isfinite(res.x[tw, i]) and np.isfinite(res.y[tw, i]) and (
+                _certain(res.status[tw, i], res.reason[tw, i]) or res.reason[tw, i] == _R["edge"]):
             return tw
     return None
 
