@@ -127,8 +127,9 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
     ValueError
         Empty sequence, frames of different sizes or bit depths, NaN picks, a pick outside
         the image, not on a marker (neither its brightest pixel nor its best 3x3 mean
-        stands 4 noise sigmas out of the background plane), or too close to the edge for its template, a template
-        larger than the image, a checkpoint written for other inputs.
+        stands 4 noise sigmas out of the background plane), or too close to the edge for
+        its template, a template larger than the image, a checkpoint written for other
+        inputs.
 
     Notes
     -----

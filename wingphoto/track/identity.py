@@ -266,11 +266,11 @@ class IdentityStage:
         at its mean velocity (a dot that left the view for a frame came back 35 px off, onto
         the next grid dot, and ran a grid diagonal per frame, ok 105-243 px off: real dots,
         repeated, fresh DEV seed 254 cam2; one lost for two frames was found on the dot
-        behind, ok 46 px off: dropped, seed 162 cam1); then a step that differs from the step before by more
-        than ``HOP_FRACTION`` of the marker's spacing is a hop onto another blob (a
-        neighbour's, or an unpicked marker's), which the motion model then follows, so
-        that the marker resumes near its prediction on the wrong blob. Only for markers
-        that no neighbour can vouch for."""
+        behind, ok 46 px off: dropped, seed 162 cam1); then a step that differs from the
+        step before by more than ``HOP_FRACTION`` of the marker's spacing is a hop onto
+        another blob (a neighbour's, or an unpicked marker's), which the motion model then
+        follows, so that the marker resumes near its prediction on the wrong blob. Only for
+        markers that no neighbour can vouch for."""
         out = np.zeros(idx.size, bool)
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
