@@ -51,6 +51,10 @@ def _frames_since(t0, t, T):
     return np.arange(t0, t, 1 if t > t0 else -1)[1:]
 
 
+#: Frames in a row without a position after which a marker found again on its own
+#: prediction needs its neighbours to vouch for it (:meth:`IdentityStage._coasted`).
+COASTED_FRAMES = 2
+
 #: The wide-search consensus (:meth:`IdentityStage._consensus`) takes only markers with a
 #: motion model that moves them as anchors when at least this many lie within a marker's
 #: neighbourhood.
@@ -116,7 +120,7 @@ class IdentityStage:
             # (changed blob while not ok, or its blob was disputed: its own prediction may
             # follow the wrong blob)
             other_blob = unk[self._hopped(unk, res, t, now=(X, Y)) | self._disputed(unk, res, t)
-                             | self._merged_with_lost(unk, ST, res, t)]
+                             | self._merged_with_lost(unk, ST, res, t) | self._coasted(unk, res, t)]
             sure = ST.copy()  # (the map is fitted to vouched neighbours only)
             sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
             odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
@@ -124,6 +128,29 @@ class IdentityStage:
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
 
+
+    def _coasted(self, idx, res, t):
+        """Whether each marker of ``idx``, since its last ok frame or its last
+        re-acquisition if later, went ``COASTED_FRAMES`` frames in a row without a position
+        and was then found again on its own prediction (boolean): extrapolated over those
+        frames, the prediction may have landed on the next dot of a grid, and the path it
+        followed since, consistent with itself, says nothing. Only for markers that no
+        neighbour can vouch for. Real dots, black, fresh DEV seed 195 cam2: re-acquired, a
+        black frame and two lost ones, found on the dot behind and ok 35 px off."""
+        out = np.zeros(idx.size, bool)
+        T = res.x.shape[0]
+        for k, i in enumerate(idx.tolist()):
+            fr = _frames_since(int(self.last_ok[i]), t, T)
+            rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
+            if rq.size:
+                fr = fr[rq[-1]:]
+            none = ~np.isfinite(res.x[fr, i])
+            if none.size < COASTED_FRAMES:
+                continue
+            # a run of COASTED_FRAMES without a position (it has one now)
+            run = np.convolve(none.astype(np.int64), np.ones(COASTED_FRAMES, np.int64), "valid")
+            out[k] = bool((run == COASTED_FRAMES).any())
+        return out
 
     def _just_reacquired(self, idx, res):
         """Whether each marker of ``idx`` was re-acquired on its last ok frame and has fewer
