@@ -241,7 +241,8 @@ def test_own_prediction_vouches_only_with_a_history_of_its_own():
                          _hopped=lambda idx, res, t, now=None: np.zeros(idx.size, bool),
                          _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
                          _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
-                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool),
+                         _coasted=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _map_verdict=lambda idx, *a: np.zeros(idx.size, np.int8),
                          _just_reacquired=lambda idx, res: np.zeros(idx.size, bool))
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.full(n, 1.0))
@@ -266,7 +267,8 @@ def test_the_frame_after_a_reacquisition_needs_its_prediction():
                          _hopped=lambda idx, res, t, now=None: np.zeros(idx.size, bool),
                          _disputed=lambda idx, res, t: np.zeros(idx.size, bool),
                          _merged_with_lost=lambda idx, ST, res, t: np.zeros(idx.size, bool),
-                         _contradicted=lambda idx, *a: np.zeros(idx.size, bool))
+                         _coasted=lambda idx, res, t: np.zeros(idx.size, bool),
+                         _map_verdict=lambda idx, *a: np.zeros(idx.size, np.int8))
     tr._just_reacquired = lambda idx, res: IdentityStage._just_reacquired(tr, idx, res)
     ctx = SimpleNamespace(X=np.zeros(n), Y=np.zeros(n), S=np.full(n, 0.95), SEC=np.full(n, -2.0),
                           ST=np.full(n, OK, np.int8), RS=np.zeros(n, np.int8), resid=np.array([3.0, 1.0, 3.0]))

@@ -88,7 +88,7 @@ class IdentityStage:
         spacing) to a strong, unambiguous match. Then a marker resuming after a gap, or
         restarting, must have moved like its neighbours since it was last ok (without
         neighbours that moved alike to vouch for it: only where the map of three or more
-        unlike ones does not contradict it, :meth:`_contradicted`, close to its own
+        unlike ones does not contradict it, :meth:`_map_verdict`, close to its own
         prediction, and only with three points of its own in the motion model - a prediction from a re-acquisition's
         borrowed velocity, not corrected since, put markers on neighbours' blobs near it:
         independent renderer, dropped, extra DEV seeds 8 and 9 right, 7 ok points 12-14 px
@@ -120,10 +120,13 @@ class IdentityStage:
             # (changed blob while not ok, or its blob was disputed: its own prediction may
             # follow the wrong blob)
             other_blob = unk[self._hopped(unk, res, t, now=(X, Y)) | self._disputed(unk, res, t)
-                             | self._merged_with_lost(unk, ST, res, t) | self._coasted(unk, res, t)]
+                             | self._merged_with_lost(unk, ST, res, t)]
             sure = ST.copy()  # (the map is fitted to vouched neighbours only)
             sure[np.concatenate([bad, unk]).astype(np.int64)] = FLAGGED
-            odd = unk[self._contradicted(unk, X, Y, sure, res, t)]
+            verdict = self._map_verdict(unk, X, Y, sure, res, t)
+            # (contradicted by the map; or found again on its own prediction after frames
+            # without a position, and not placed by the map either)
+            odd = unk[(verdict < 0) | ((verdict == 0) & self._coasted(unk, res, t))]
             bad = np.concatenate([bad, far, other_blob, odd]).astype(np.int64)
             ST[bad] = FLAGGED
             RS[bad] = _R["jump"]
@@ -170,9 +173,10 @@ class IdentityStage:
         out[inside] = res.reason[lo[inside], idx[inside]] == _R["reacquired"]
         return out & (self.nh[idx] < 3)
 
-    def _contradicted(self, idx, X, Y, ST, res, t):
+    def _map_verdict(self, idx, X, Y, ST, res, t):
         """Whether each resuming marker of ``idx`` is far from where its neighbours' affine
-        map puts it, though they did not move alike (boolean).
+        map puts it, though they did not move alike: -1 contradicted, +1 placed there, 0
+        no such map (int8).
 
         :meth:`_inconsistent` compares a marker only with neighbours that agree on one
         motion (an affine map with RMS <= 1.5 px, or a group that moved alike); over a gap
@@ -187,12 +191,14 @@ class IdentityStage:
         went when it determines the marker (:func:`~.reacquire._determined` with
         ``CONTRADICT_AMPLIFY``); further than
         ``ASTRAY_FRACTION`` of its spacing (and than 2.5 px plus twice the map's RMS) is a
-        contradiction. Only flags: a marker that no such map determines is not judged.
+        contradiction. Flags only, and places only a marker found again on its own
+        prediction after frames without a position (:meth:`_coasted`): a marker that no
+        such map determines is not judged.
         Independent renderer, standard DEV ``dropped`` seed 2 right: marker 21, lost on the
         frame the three dropped frames were found on, resumed next frame on a neighbour's
         blob 1.4 px from its twice-extrapolated prediction, 11 px off; its three
         neighbours' map put it within 0.6 px of the truth."""
-        out = np.zeros(idx.size, bool)
+        out = np.zeros(idx.size, np.int8)
         okn = (ST == OK).nonzero()[0]
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
@@ -212,7 +218,7 @@ class IdentityStage:
             rms = float(np.sqrt(np.mean(np.sum((_apply_affine(M, prev) - now) ** 2, axis=1))))
             q = _apply_affine(M, Pi[None, :])[0]
             lim = max(2.5 + 2.0 * rms, ASTRAY_FRACTION * self._spacing[i])
-            out[k] = math.hypot(X[i] - q[0], Y[i] - q[1]) > lim
+            out[k] = -1 if math.hypot(X[i] - q[0], Y[i] - q[1]) > lim else 1
         return out
 
     def _disputed(self, idx, res, t):
