@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-_CHECKPOINT_VERSION = 4  # 4: passes of picks in several frames
+_CHECKPOINT_VERSION = 5  # 4: passes of picks in several frames; 5: the tracker state holds `restarted`
 #: Frames whose content the fingerprint hashes (spread over the sequence).
 FINGERPRINT_FRAMES = 8
 _WAY_OUT = "delete it or pass another checkpoint path"

@@ -466,6 +466,7 @@ class ReacquireStage:
                 self.nh[i] = 2
             self.resid_rms[i] = 1.0
             self.lostflag[i] = False
+            self.restarted[i] = True
             self.last_ok[i] = t  # checked against the neighbours: the reference from now on
 
 

@@ -552,6 +552,7 @@ def relocate_group(tr, frame, t, res, direction, ctx):
         tr.nh[i] = 2
         tr.resid_rms[i] = 1.0
         tr.lostflag[i] = False
+        tr.restarted[i] = True
         tr.last_ok[i] = t
     out = [o[0] for o in out]
     if out:

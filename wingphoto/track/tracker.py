@@ -249,7 +249,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
     """
 
     _STATE = ("hist_x", "hist_t", "nh", "resid_rms", "lostflag", "last_upd", "h", "rb", "sign", "mass0",
-              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "noise", "peak0", "last_ok")
+              "pos", "last_score", "stagger", "ref_pos", "mass_ref", "score_ref", "rd", "noise", "peak0", "last_ok",
+              "restarted")
 
     def __init__(self, p, is_u8, shape):
         self._prev = self._prev2 = None
@@ -387,6 +388,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         self.nh = np.ones(n, np.int64)
         self.resid_rms = np.ones(n)
         self.lostflag = np.zeros(n, bool)
+        # re-acquired or restarted at least once (its motion model began again, maybe with
+        # a step borrowed from its neighbours: GlitchStage._lose_unmoved)
+        self.restarted = np.zeros(n, bool)
         self.last_upd = np.zeros(n, np.int64)
         self.last_ok = np.zeros(n, np.int64)
         self.pos = np.column_stack([x, y])
