@@ -61,3 +61,15 @@ def test_the_miss_is_measured_on_the_still_markers_alone():
     np.testing.assert_allclose(miss, [1.2, -1.8], atol=1e-9)
     # a miss below half a pixel is no miss
     assert tk._shift_miss(_solution(pred + [0.3, 0.2], pred)) is None
+
+
+def test_a_count_of_dropped_frames_is_in_doubt_only_when_weak_and_matched():
+    from wingphoto.track.glitch import _drop_count_in_doubt
+
+    # 4 of 7 where predicted, another count 3: in doubt; another count 2: clear
+    assert _drop_count_in_doubt(5, {1: 0, 3: 3, 5: 4}, 7)
+    assert not _drop_count_in_doubt(5, {1: 0, 3: 2, 5: 4}, 7)
+    # most markers where predicted: clear, whatever the others
+    assert not _drop_count_in_doubt(3, {2: 5, 3: 6, 4: 5}, 7)
+    # no other count tried
+    assert not _drop_count_in_doubt(1, {1: 2}, 7)

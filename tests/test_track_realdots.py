@@ -234,3 +234,18 @@ def test_a_dot_whose_identity_was_in_doubt_does_not_resume_ok_on_the_next_dot(ki
     tr = track_markers(seq.images, picks, camera=camera, progress=False)
     a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+
+
+@pytest.mark.parametrize("camera, seed", [("cam1", 279), ("cam2", 286)])
+def test_dropped_frames_do_not_move_a_dot_onto_the_next_one(camera, seed):
+    # fresh real-dot DEV seeds 261-320, session 22, dropped: cam1 279, a dot re-acquired on
+    # the frame before three dropped frames, its model one point and a borrowed step, was
+    # found on the dot behind (12 ok points 34 px off; GlitchStage._lose_unmoved); cam2
+    # 286, "5 dropped" won over the true 3 by 4 markers of 7 to 3 and a dot went ok one
+    # spacing ahead (12 points 35 px off; glitch._drop_count_in_doubt, the markers lost at once)
+    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
+    seq = realdots.with_glitch(base, "dropped", seed=seed, n_frames=60)
+    picks = base.picks(camera)
+    tr = track_markers(seq.images, picks, camera=camera, progress=False)
+    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
