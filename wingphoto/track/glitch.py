@@ -61,7 +61,6 @@ def _median_residual(ctx, nh):
     return float(np.median(r)) if r.size else np.inf
 
 
-
 def _drop_count_in_doubt(dt, dropped_good, n):
     """Whether ``dt`` dropped frames, the winning hypothesis, is in doubt: it puts fewer
     than ``_DROP_CLEAR`` of the ``n`` checkable markers where predicted, and another count
@@ -72,6 +71,7 @@ def _drop_count_in_doubt(dt, dropped_good, n):
     best = dropped_good[dt]
     others = [g for k, g in dropped_good.items() if k != dt]
     return best < _DROP_CLEAR * n and bool(others) and max(others) >= best - 1
+
 
 class GlitchStage:
     """The tracker's glitch checks (mixed into :class:`~.tracker.Tracker`, whose state
@@ -297,9 +297,9 @@ class GlitchStage:
         restarted with fewer than three points in their motion model since: the hypothesis
         moves each history along its own motion, and theirs is one point, or one step
         borrowed from the neighbours at the re-acquisition, so their prediction lags where
-        the frames dropped left them. (Not a marker in its first frames after its pick:
-        two points of its own.) Found again by their
-        neighbours, not on that prediction. Real dots, dropped, fresh DEV seed 279 cam1:
+        the frames dropped left them (not a marker in its first frames after its pick: two
+        points of its own). Found again by their neighbours, not on that prediction. Real
+        dots, dropped, fresh DEV seed 279 cam1:
         a dot re-acquired on frame 19 with a borrowed step of 6 px (its own, 12), three
         frames dropped on frame 20, found on frame 21 on the dot behind - four frames'
         motion less one spacing made its path look smooth - and a neighbour's
