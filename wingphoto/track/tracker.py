@@ -206,6 +206,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         Running RMS (px) of the motion model's residual.
     lostflag : (N,) ndarray of bool
         Lost (coasted beyond ``max_coast``), waiting for re-acquisition.
+    restarted : (N,) ndarray of bool
+        Re-acquired at least once: with fewer than three points in its motion model, its
+        velocity may be a step borrowed from its neighbours (``GlitchStage._lose_unmoved``).
     last_ok, last_upd : (N,) ndarray of int
         Frame of the last ``ok`` point / of the last template update.
     last_score, score_ref, mass_ref : (N,) ndarray of float
