@@ -51,6 +51,13 @@ def _frames_since(t0, t, T):
     return np.arange(t0, t, 1 if t > t0 else -1)[1:]
 
 
+def _from_last_reacquisition(fr, res, i):
+    """Frames ``fr`` of marker ``i`` from its last re-acquisition among them on (all if
+    none): a re-acquisition moved it on purpose, its path is followed from there."""
+    rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
+    return fr[rq[-1]:] if rq.size else fr
+
+
 #: Frames in a row without a position after which a marker found again on its own
 #: prediction needs its neighbours to vouch for it (:meth:`IdentityStage._coasted`).
 COASTED_FRAMES = 2
@@ -143,10 +150,7 @@ class IdentityStage:
         out = np.zeros(idx.size, bool)
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
-            fr = _frames_since(int(self.last_ok[i]), t, T)
-            rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
-            if rq.size:
-                fr = fr[rq[-1]:]
+            fr = _from_last_reacquisition(_frames_since(int(self.last_ok[i]), t, T), res, i)
             none = ~np.isfinite(res.x[fr, i])
             if none.size < COASTED_FRAMES:
                 continue
@@ -311,10 +315,7 @@ class IdentityStage:
             if not 0 <= t0 < T or abs(t - t0) < (2 if now is not None else 3):
                 continue
             step = 1 if t > t0 else -1
-            fr = np.arange(t0, t, step)
-            rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
-            if rq.size:  # a re-acquisition moved it on purpose: follow it from there
-                fr = fr[rq[-1]:]
+            fr = _from_last_reacquisition(np.arange(t0, t, step), res, i)
             P = np.column_stack([res.x[fr, i], res.y[fr, i]])
             if now is not None:
                 fr = np.append(fr, t)
