@@ -1,10 +1,24 @@
-"""The hop test of a marker resuming after a gap (:meth:`IdentityStage._hopped`)."""
+"""The hop test of a marker resuming after a gap (:meth:`IdentityStage._hopped`), in both
+engines (:mod:`wingphoto.track.hop`)."""
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
+from wingphoto.track import engine, hop
 from wingphoto.track.identity import HOP_FRACTION, IdentityStage
 from wingphoto.track.status import _R
+
+
+@pytest.fixture(autouse=True, params=["numpy", "numba"])
+def either_engine(request):
+    """Every test runs on the numpy twin and on the compiled kernel."""
+    if request.param == "numba" and not engine.NUMBA_AVAILABLE:
+        pytest.skip("numba is not installed")
+    was = engine.use_numba()
+    engine.try_numba(request.param == "numba")
+    yield
+    engine.try_numba(was)
 
 
 def _stage(last_ok, spacing=10.0):
@@ -87,3 +101,41 @@ def test_a_hop_on_the_resuming_frame_itself():
     assert IdentityStage._hopped(_stage([8]), np.array([0]), res, 10, now=now).tolist() == [True]
     smooth = (np.array([p[10, 0]]), np.array([p[10, 1]]))
     assert not IdentityStage._hopped(_stage([8]), np.array([0]), res, 10, now=smooth).any()
+
+
+def _random_rows(rng, T, N):
+    """Paths that hop, stall, repeat, skip frames and restart, as a tracker writes them."""
+    v = rng.normal(0.0, 3.0, (N, 2))
+    P = 200.0 + np.cumsum(np.broadcast_to(v, (T, N, 2)) + rng.normal(0.0, 0.3, (T, N, 2)), axis=0)
+    for i in range(N):
+        for _ in range(rng.integers(0, 3)):  # hops of up to a spacing and more
+            P[rng.integers(1, T):, i] += rng.normal(0.0, 4.0, 2)
+        for f in rng.integers(1, T - 1, rng.integers(0, 3)):  # repeated frames (stalls)
+            P[f, i] = P[f - 1, i] + rng.normal(0.0, 0.1, 2)
+        P[rng.integers(0, T, rng.integers(0, 4)), i] = np.nan  # frames without a position
+    res = SimpleNamespace(x=P[..., 0].copy(), y=P[..., 1].copy(), reason=np.zeros((T, N), np.int8))
+    res.reason[rng.random((T, N)) < 0.03] = _R["reacquired"]
+    return res
+
+
+def test_both_engines_agree_on_random_paths():
+    rng = np.random.default_rng(7)
+    seen = set()
+    for trial in range(60):
+        T, N = 30, 8
+        res = _random_rows(rng, T, N)
+        last_ok = rng.integers(0, T - 3, N)
+        t = T - 1 if trial % 2 else 0  # forward and backward passes
+        last_ok = last_ok if t else T - 1 - last_ok
+        now = (res.x[t] + rng.normal(0.0, 2.0, N), res.y[t] + rng.normal(0.0, 2.0, N))
+        idx = np.arange(N)
+        lims = HOP_FRACTION * rng.uniform(5.0, 15.0, N)
+        for with_now in (None, now):
+            got = {}
+            for compiled in (False, True):
+                engine.try_numba(compiled)
+                got[compiled] = hop.hopped(res.x, res.y, res.reason, _R["reacquired"], idx, last_ok, t,
+                                           with_now, lims)
+            np.testing.assert_array_equal(got[False], got[True])
+            seen.update(got[False].tolist())
+    assert seen == {False, True}  # (both verdicts were compared)

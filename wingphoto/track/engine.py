@@ -25,7 +25,7 @@ NUMBA_AVAILABLE = _numba is not None
 #: kernel's cache by its own file only, so a kernel that calls another module's kernel
 #: (predict -> geometry) or reads its constant (refine -> options) would keep running a
 #: stale copy after that module changed; :func:`clear_stale_caches` prevents it.
-KERNEL_MODULES = ("audit", "background", "engine", "fastpath", "geometry", "match", "options", "predict", "refine", "sigma", "status")
+KERNEL_MODULES = ("audit", "background", "engine", "fastpath", "geometry", "hop", "match", "options", "predict", "refine", "sigma", "status")
 _enabled = NUMBA_AVAILABLE
 _fast_frames = True
 

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from ..motion import estimate_shift, frame_content
-from .identity import STALL_PX
+from .hop import STALL_PX
 from .predict import STILL_SPEED, model_speed, shift_history
 from .relocate import MIN_INLIERS
 from .status import _R, COAST_PX, LOST

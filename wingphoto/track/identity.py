@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from .hop import HOP_FRACTION, from_last_reacquisition, hopped
 from .geometry import _apply_affine, _fit_affine, _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
@@ -17,17 +18,6 @@ from .status import _R, FLAGGED, OK
 #: does not resume ok on its own prediction (:meth:`IdentityStage._disputed`).
 _DISPUTED = (_R["conflict"], _R["jump"])
 
-#: A step of a marker's path while not ok that differs from the step before by more than
-#: this fraction of its spacing is a hop onto another blob (:meth:`IdentityStage._hopped`).
-HOP_FRACTION = 0.4
-#: A step shorter than this (px) between two longer ones is a one-frame stall (a repeated
-#: frame), not part of a hop (:meth:`IdentityStage._hopped`).
-STALL_PX = 0.5
-#: ... and the path resumes within this fraction of the hop limit (on schedule, or one
-#: frame late). With the whole hop limit, a marker slowing at a reversal (0.4 px/frame)
-#: before a 9 px hop onto a neighbour's blob was a 'stall' that hid the hop: it resumed
-#: ok there, 10 px off (independent renderer, black, fresh DEV seed 57 right).
-STALL_RESUME = 0.5
 #: A flagged marker further than this fraction of its spacing (and than the neighbours'
 #: tolerance) from where its neighbours put it is astray (:meth:`IdentityStage._astray`).
 ASTRAY_FRACTION = 0.4
@@ -49,13 +39,6 @@ def _frames_since(t0, t, T):
     if not 0 <= t0 < T:
         return np.zeros(0, np.int64)
     return np.arange(t0, t, 1 if t > t0 else -1)[1:]
-
-
-def _from_last_reacquisition(fr, res, i):
-    """Frames ``fr`` of marker ``i`` from its last re-acquisition among them on (all if
-    none): a re-acquisition moved it on purpose, its path is followed from there."""
-    rq = np.flatnonzero(res.reason[fr, i] == _R["reacquired"])
-    return fr[rq[-1]:] if rq.size else fr
 
 
 #: Frames in a row without a position after which a marker found again on its own
@@ -150,7 +133,7 @@ class IdentityStage:
         out = np.zeros(idx.size, bool)
         T = res.x.shape[0]
         for k, i in enumerate(idx.tolist()):
-            fr = _from_last_reacquisition(_frames_since(int(self.last_ok[i]), t, T), res, i)
+            fr = from_last_reacquisition(_frames_since(int(self.last_ok[i]), t, T), res.reason, _R["reacquired"], i)
             none = ~np.isfinite(res.x[fr, i])
             if none.size < COASTED_FRAMES:
                 continue
@@ -308,42 +291,13 @@ class IdentityStage:
         another blob (a neighbour's, or an unpicked marker's), which the motion model then
         follows, so that the marker resumes near its prediction on the wrong blob. Only for
         markers that no neighbour can vouch for."""
-        out = np.zeros(idx.size, bool)
         T = res.x.shape[0]
-        for k, i in enumerate(idx.tolist()):
-            t0 = int(self.last_ok[i])
-            if not 0 <= t0 < T or abs(t - t0) < (2 if now is not None else 3):
-                continue
-            step = 1 if t > t0 else -1
-            fr = _from_last_reacquisition(np.arange(t0, t, step), res, i)
-            P = np.column_stack([res.x[fr, i], res.y[fr, i]])
-            if now is not None:
-                fr = np.append(fr, t)
-                P = np.vstack([P, [[now[0][i], now[1][i]]]])
-            fin = np.isfinite(P).all(axis=1)
-            fr, P = fr[fin], P[fin]
-            if fr.size < 3:
-                continue
-            lim = HOP_FRACTION * self._spacing[i]
-            cons = np.abs(np.diff(fr)) == 1
-            V = np.diff(P, axis=0)
-            keep = np.ones(fr.size, bool)
-            for j in range(2, fr.size - 1):  # a one-frame stall (a repeated frame) comes back
-                if cons[j - 2] and cons[j - 1] and cons[j] and math.hypot(*V[j - 1]) < STALL_PX:
-                    back = P[j + 1] - (P[j - 1] + 2.0 * V[j - 2])  # or resumes one frame late
-                    keep[j] = min(math.hypot(*back), math.hypot(*(V[j] - V[j - 2]))) > STALL_RESUME * lim
-            stalls = fr[~keep]
-            fr, P = fr[keep], P[keep]
-            dt = np.abs(np.diff(fr))
-            V = np.diff(P, axis=0) / dt[:, None]
-            # a step over one or two frames without a position (lost, out of frame) counts at
-            # its mean velocity; one over a dropped stall does not (it moved a frame less)
-            lo, hi = np.minimum(fr[:-1], fr[1:]), np.maximum(fr[:-1], fr[1:])
-            over_stall = ((stalls > lo[:, None]) & (stalls < hi[:, None])).any(1)
-            usable = (dt == 1) | ((dt <= 3) & ~over_stall)
-            both = usable[1:] & usable[:-1]
-            acc = np.hypot(*(V[1:] - V[:-1]).T)[both]
-            out[k] = acc.size > 0 and acc.max() > lim
+        t0 = self.last_ok[idx].astype(np.int64)
+        # (two steps at least: with this frame's, one frame between; without, two)
+        judged = (t0 >= 0) & (t0 < T) & (np.abs(t - t0) >= (2 if now is not None else 3))
+        out = np.zeros(idx.size, bool)
+        out[judged] = hopped(res.x, res.y, res.reason, _R["reacquired"], idx[judged], t0[judged], t, now,
+                             HOP_FRACTION * self._spacing[idx[judged]])
         return out
 
     def _astray(self, idx, X, Y, ST, res, t):
