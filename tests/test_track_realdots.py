@@ -249,3 +249,24 @@ def test_dropped_frames_do_not_move_a_dot_onto_the_next_one(camera, seed):
     tr = track_markers(seq.images, picks, camera=camera, progress=False)
     a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+
+
+@pytest.mark.parametrize("kind, camera, seed", [("dropped", "cam2", 386), ("repeated", "cam1", 430),
+                                                 ("repeated", "cam1", 434)])
+def test_a_glitch_that_leaves_the_dots_far_from_their_predictions_is_not_explained(kind, camera, seed):
+    # fresh real-dot DEV seeds 381-440, session 23: dropped cam2 386, three frames dropped
+    # after earlier glitches had grown the dots' residual rms to ~3 px: the whole grid moved
+    # onto the dots behind, a median 7.5 px from their predictions but within each dot's
+    # own limit of 4 rms, and passed as where predicted (3 points ok 34 px off); repeated
+    # cam1 430, three dots leaving the view passed as "1 frame dropped" at a median of
+    # 7.2 px (2 points ok 33-66 px off). Now neither passes: glitch._MEDIAN_RESID_PX.
+    # repeated cam1 434: a dot re-acquired on a repeated frame borrowed its neighbours'
+    # step, nil on a repeat, as its velocity, stood still and was found on the dot behind
+    # (2 points ok 33 px off). Nothing is re-acquired on a repeat now (Tracker._update).
+    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
+    seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60)
+    picks = base.picks(camera)
+    tr = track_markers(seq.images, picks, camera=camera, progress=False)
+    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"].sum() > 100  # (followed, not lost)
