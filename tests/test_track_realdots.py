@@ -268,8 +268,8 @@ def test_a_glitch_that_leaves_the_dots_far_from_their_predictions_is_not_explain
     # "where predicted", as did the motion model, won by a smaller median (7 points ok
     # 33-66 px off): a frame broken by its median alone now needs more markers explained.
     # dropped cam1 160 (fresh DEV 141-200, session 22): after a frame no glitch explained,
-    # "a repeated frame" explained the next one on 3 of 4 dots - a repeat of a frame on
-    # which they were not measured (4 points ok 33 px off; GlitchStage._repeat_holds).
+    # "a repeated frame" explained the next one on 3 of 4 dots - a repeat of a frame no
+    # glitch explained (4 points ok 33 px off; GlitchStage._repeat_holds).
     base = realdots.render_realdots(camera, seed=seed, n_frames=65)
     seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60)
     picks = base.picks(camera)

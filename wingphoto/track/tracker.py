@@ -257,6 +257,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
 
     def __init__(self, p, is_u8, shape):
         self._prev = self._prev2 = None
+        self._prev_unexplained = False  # (no glitch explained the previous frame)
         self.p = p
         self.is_u8 = is_u8
         self.H, self.W = shape
@@ -458,13 +459,17 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         stage; the tracker keeps only the state that persists from frame to frame.
         """
         if fast_step(self, frame, t, res):
+            self._prev_unexplained = False
             return  # a steady frame, handled end to end by the compiled fast frame
+        unexplained = False
         if not self._frame_glitch(frame, t, res, direction):
             ctx = self._solve(frame, t)
             if self._broken(ctx):
                 ctx = self._recover(frame, t, direction, ctx)
             self._judge(t, res, ctx)
             self._update(frame, t, res, direction, ctx)
+            unexplained = ctx.glitch
+        self._prev_unexplained = unexplained
         self._prev2, self._prev = self._prev, frame
 
     def _solve(self, frame, t, aged=0):
