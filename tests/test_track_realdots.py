@@ -27,6 +27,16 @@ def _photo(camera):
     return img, ref
 
 
+def _glitched_errors(kind, camera, seed):
+    """Per point-frame errors (:func:`point_errors`) of a 60-frame real-dot sequence with
+    glitch ``kind`` ('none': as rendered), tracked from frame-0 picks of the picked dots."""
+    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
+    seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60) if kind != "none" else base
+    picks = base.picks(camera)
+    tr = track_markers(seq.images, picks, camera=camera, progress=False)
+    return point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+
+
 def test_highlight_does_not_set_the_centroid():
     # cam1's dots carry a specular spot (~200 DN) on a ~35 DN face: a cut at a fifth of
     # the spot's peak dropped the face (90th percentile 0.61 px, worst 2.1 px off the
@@ -132,11 +142,7 @@ def test_no_dot_followed_one_grid_spacing_off_after_a_glitch(kind, camera, seed)
     # grid moved it by their mean displacement over 23 frames, 34 px from where it was,
     # onto the next dot (seed 101: 11 points ok 30-64 px off; seed 65: 1 point 31 px off,
     # once _last_written mapped its written position; now refused: reacquire._REACH_SPACING)
-    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
-    seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60)
-    picks = base.picks(camera)
-    tr = track_markers(seq.images, picks, camera=camera, progress=False)
-    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    a = _glitched_errors(kind, camera, seed)
     assert not (a["error"][a["ok"]] > 3.0).any(), np.argwhere(a["ok"] & (a["error"] > 3.0))[:10]
     assert a["ok"][:8].any(axis=1).all()  # followed before the glitch
 
@@ -228,11 +234,7 @@ def test_a_dot_whose_identity_was_in_doubt_does_not_resume_ok_on_the_next_dot(ki
     # own prediction, ok 35 px off (identity._coasted).
     # repeated cam2 236: re-acquired from its 'ambiguous' position of frame 1, one spacing
     # off, 27 frames later (reacquire._last_written takes only certain positions).
-    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
-    seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60) if kind != "none" else base
-    picks = base.picks(camera)
-    tr = track_markers(seq.images, picks, camera=camera, progress=False)
-    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    a = _glitched_errors(kind, camera, seed)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
 
 
@@ -243,11 +245,7 @@ def test_dropped_frames_do_not_move_a_dot_onto_the_next_one(camera, seed):
     # found on the dot behind (12 ok points 34 px off; GlitchStage._lose_unmoved); cam2
     # 286, "5 dropped" won over the true 3 by 4 markers of 7 to 3 and a dot went ok one
     # spacing ahead (12 points 35 px off; glitch._drop_count_in_doubt, the markers lost at once)
-    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
-    seq = realdots.with_glitch(base, "dropped", seed=seed, n_frames=60)
-    picks = base.picks(camera)
-    tr = track_markers(seq.images, picks, camera=camera, progress=False)
-    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    a = _glitched_errors("dropped", camera, seed)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
 
 
@@ -270,10 +268,6 @@ def test_a_glitch_that_leaves_the_dots_far_from_their_predictions_is_not_explain
     # dropped cam1 160 (fresh DEV 141-200, session 22): after a frame no glitch explained,
     # "a repeated frame" explained the next one on 3 of 4 dots - a repeat of a frame no
     # glitch explained (4 points ok 33 px off; GlitchStage._repeat_holds).
-    base = realdots.render_realdots(camera, seed=seed, n_frames=65)
-    seq = realdots.with_glitch(base, kind, seed=seed, n_frames=60)
-    picks = base.picks(camera)
-    tr = track_markers(seq.images, picks, camera=camera, progress=False)
-    a = point_errors(tr, seq, camera, points=np.flatnonzero(np.all(np.isfinite(picks), axis=1)))
+    a = _glitched_errors(kind, camera, seed)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
     assert a["ok"].sum() > 100  # (followed, not lost)
