@@ -242,6 +242,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         kept), and the picks' sigma (:meth:`from_picks`).
     _prev, _prev2 : ndarray or None
         The previous two frames (repeated frames, camera bumps).
+    _prev_unexplained : bool
+        No glitch explained the previous frame: a repeat of it is no hypothesis
+        (:meth:`~.glitch.GlitchStage._repeat_holds`). Like the previous frames, not saved
+        in a checkpoint (False on resume).
 
     Notes
     -----
