@@ -51,8 +51,9 @@ _MEDIAN_RESID_PX = 3.0
 #: A glitch hypothesis that leaves the markers, in the median, further than this (px, plus
 #: its ``_DROP_TOL``) from their predictions explains nothing: three dots leaving the view
 #: passed as "1 frame dropped" at a median of 7.2 px (fresh DEV seed 430 cam1, repeated:
-#: ok 33-66 px off). (3 px refused right counts of dropped frames on real dots, whose
-#: quadratic, extrapolated over them, misses by 3-5 px: ok share 4 % lower.)
+#: ok 33-66 px off). Winning hypotheses seen in the DEV logs left medians of 1.0-3.9 px.
+#: (A first version, 3 px together with flagging every frame broken by its median, cost
+#: 4.3 % of the real-dot DEV ok points; the two were not measured apart.)
 _HYPOTHESIS_RESID_PX = 5.0
 #: A frame on which most markers moving at least this fast (px/frame) are back where they
 #: were is a repeat (:meth:`_stalled`).

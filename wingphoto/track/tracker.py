@@ -758,8 +758,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
                 hopped = imp[hop]
                 hopped = hopped[~rel[hopped]]
                 RS[hopped] = _R["jump"]
-        news = not ctx.glitch and ctx.aged >= 0  # (not an unexplained frame, nor a repeat of the last one)
-        if not news:
+        new_image = not ctx.glitch and ctx.aged >= 0  # (not an unexplained frame, nor a repeat of the last one)
+        if not new_image:
             rel[:] = False  # nothing new
         held = self._poor_match(S, ctx.sigma)  # (before the model moves the running score)
         upd = update_model(t, X, Y, S, ST, rel, ctx.resid, ctx.mass, self.hist_x, self.hist_t, self.nh,
@@ -770,9 +770,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         # (nor is anything re-acquired on a repeat: the marker would borrow its neighbours'
         # step, nil on a repeated image, as its velocity, stand still on the next frames and
         # be found on the dot behind - real dots, repeated, fresh DEV seed 434 cam1: ok 33 px off)
-        if self.lostflag.any() and news:
+        if self.lostflag.any() and new_image:
             self._reacquire(frame, t, res, direction, X, Y, S, ctx.XP, ctx.YP, ST, RS, ctx.pred, ctx.step_velocity)
-        if self.lostflag.any() and news:
+        if self.lostflag.any() and new_image:
             relocate_group(self, frame, t, res, direction, ctx)  # a whole group lost at once
         res.x[t], res.y[t], res.score[t] = X, Y, S
         res.xpix[t], res.ypix[t] = ctx.XP, ctx.YP
