@@ -87,6 +87,33 @@ def _apply_affine(M, p):
     return p @ M[:, :2].T + M[:, 2]
 
 
+#: An affine map of neighbours is trusted only when each of its points is checked by the
+#: others: a point whose leverage in the fit (its hat-matrix diagonal, 1 for a point that
+#: alone fixes a direction, e.g. off the line the others lie on) is above this is fitted
+#: whatever its error (:func:`_max_leverage`). (Five points spread at random have a
+#: largest leverage of 0.90 in the median, 0.99 at the 95th percentile; a dot alone on its
+#: row of a grid, 1.000.)
+MAX_POINT_LEVERAGE = 0.99
+
+
+def _max_leverage(src):
+    """Largest leverage (hat-matrix diagonal, 0-1) of the points ``src`` (n, 2) in an affine
+    fit: how much of a point's own error its fitted value follows. Near 1 for a point that
+    no other point checks: on a grid of dots the neighbours often lie on two rows, one of
+    them a single dot, and any displacement of that dot - a wrong match on the next dot of
+    its row - fits exactly (real dots, dropped, DEV seed 610 cam1, frame 1: the map of six
+    neighbours, a dot leaving the view matched on its row neighbour's blob among them,
+    fitted at 0.19 px and sent two wide-searched dots along their row, ok 25-50 px off).
+    Written by hand: a three-column SVD; no library gives the hat matrix of a fit."""
+    n = len(src)
+    if n <= 3:
+        return 1.0
+    A = np.column_stack([src - src.mean(0), np.ones(n)])
+    U, sv, _ = np.linalg.svd(A, full_matrices=False)
+    keep = sv > 1e-9 * sv[0]
+    return float(np.max(np.sum(U[:, keep] ** 2, axis=1)))
+
+
 def _one_out(src, dst, tol):
     """The point whose removal makes the least-squares affine fit of the others good, or -1.
 
@@ -107,6 +134,8 @@ def _one_out(src, dst, tol):
     best, best_rms = -1, np.inf
     for k in range(n):
         o = np.arange(n) != k
+        if _max_leverage(src[o]) > MAX_POINT_LEVERAGE:
+            continue  # (the others fit whatever one of them does: no evidence)
         r = np.linalg.norm(_apply_affine(_fit_affine(src[o], dst[o]), src[o]) - dst[o], axis=1)
         rk = math.sqrt(float(np.mean(r**2)))
         if rk < best_rms:
@@ -114,7 +143,7 @@ def _one_out(src, dst, tol):
     return best if best_rms <= tol and best_rms < 0.5 * rms_all else -1
 
 
-def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False):
+def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False, inliers=False):
     """Affine src -> dst with outlier rejection; optionally also the inliers' RMS residual.
 
     With ``one_out``, the iterations start without the one point :func:`_one_out` finds
@@ -140,10 +169,10 @@ def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False):
     if not quality:
         return M
     if M is None:
-        return None, np.inf, 0
+        return (None, np.inf, 0, keep) if inliers else (None, np.inf, 0)
     res = np.linalg.norm(_apply_affine(M, src[keep]) - dst[keep], axis=1)
     rms = float(np.sqrt(np.mean(res**2))) if keep.sum() > 3 else (0.0 if keep.sum() == 3 else np.inf)
-    return M, rms, int(keep.sum())
+    return (M, rms, int(keep.sum()), keep) if inliers else (M, rms, int(keep.sum()))
 
 
 def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.inf):
@@ -151,7 +180,8 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
 
     ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
     A robust affine map when four or more of them agree with one (RMS <= 1.5 px; a single
-    gross outlier is left out first, :func:`_one_out`), else
+    gross outlier is left out first, :func:`_one_out`) and each of those is checked by the
+    others (:func:`_max_leverage`), else
     the mean displacement of the largest group that moved alike (within 2 px + 10 %: all
     of them when there are two or three, at least three otherwise; a single neighbour's
     displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
@@ -162,8 +192,8 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
     """
     m = len(prev)
     if m >= 4:
-        M, rms, nin = _robust_affine(prev, now, quality=True, one_out=True)
-        if M is not None and nin >= 4 and rms <= 1.5:
+        M, rms, nin, keep = _robust_affine(prev, now, quality=True, one_out=True, inliers=True)
+        if M is not None and nin >= 4 and rms <= 1.5 and _max_leverage(prev[keep]) <= MAX_POINT_LEVERAGE:
             return _apply_affine(M, p0[None, :])[0], 2.5
     if m < max(min_m, 1):
         return None

@@ -138,6 +138,11 @@ class FrameContext:
     shift : (2,) ndarray of float
         The camera's shift (px) measured on this frame (:meth:`Tracker._recover`; zero
         without a bump): the image moved by it besides the markers' own motion.
+    measured : tuple of ndarray or None
+        After frames dropped (:meth:`Tracker._recover`): the motion model's measured
+        history before them, (N, 3, 2) positions and (N, 3) frames moved back by the
+        frames dropped; the markers fed on this frame keep it behind their new point
+        (:meth:`~.glitch.GlitchStage._keep_measured`). Empty otherwise.
     """
 
     pred: np.ndarray
@@ -174,6 +179,7 @@ class FrameContext:
     unexplained: np.ndarray = None
     unvouched: np.ndarray = None
     shift: np.ndarray = None
+    measured: tuple = ()
 
     def step_velocity(self, disp):
         """Velocity (px per frame, (..., 2)) of markers that moved by ``disp`` px since the
@@ -765,6 +771,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         upd = update_model(t, X, Y, S, ST, rel, ctx.resid, ctx.mass, self.hist_x, self.hist_t, self.nh,
                            self.resid_rms, self.last_score, self.last_ok, self.mass_ref, self.score_ref,
                            self.last_upd, np.array([p.update_score, p.refresh_below, p.update_every], np.float64))
+        if ctx.measured:
+            self._keep_measured(ctx.measured, rel)
         if upd.any():
             self._refresh_templates(frame, t, X, Y, upd)
         # (nor is anything re-acquired on a repeat: the marker would borrow its neighbours'
