@@ -356,6 +356,14 @@ def _build(key):
                     ngood += 1
         if nchk >= 3 and ngood < fpar[6] * nchk:
             return 8
+        # (too few markers for a constellation, one of them moving: the Python step asks
+        # whether frames dropped would put it on another blob, GlitchStage._few_in_doubt)
+        if 0 < nchk < 3:
+            for i in range(n):
+                if fits[i] and nh[i] >= 3 and gap[i] <= 2:
+                    dtm = abs(ht[i, 0] - ht[i, 1])
+                    if dtm > 0 and np.hypot(hx[i, 0, 0] - hx[i, 1, 0], hx[i, 0, 1] - hx[i, 1, 1]) >= fpar[12] * dtm:
+                        return 8
         # (... or their median residual is too large: glitch._median_residual)
         rfit = np.empty(n)
         nfit = 0
@@ -463,7 +471,7 @@ def _build(key):
         """One steady frame of :meth:`Tracker.step` (see the module docstring).
 
         ``fpar``: min_mass_ratio, min_score, max_sigma, _FADED, _WEAK, _BG_RESIDUAL_FADED,
-        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX. Returns 0 when the frame was
+        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX, _MOVING_PX. Returns 0 when the frame was
         handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
         positions), -1 when it was handled and templates are due for an update (``upd``),
         else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
@@ -501,7 +509,7 @@ def _params(tr):
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
     fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._FADED, tk._WEAK, tk._BG_RESIDUAL_FADED,
                      gl._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN,
-                     gl._MEDIAN_RESID_PX])
+                     gl._MEDIAN_RESID_PX, gl._MOVING_PX])
     return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=gl._SAMPLE, p=p)
 
 

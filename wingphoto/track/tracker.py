@@ -476,6 +476,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             ctx = self._solve(frame, t)
             if self._broken(ctx):
                 ctx = self._recover(frame, t, direction, ctx)
+            elif self._few_to_check(ctx):
+                ctx = self._few_in_doubt(frame, t, direction, ctx)
             self._judge(t, res, ctx)
             self._update(frame, t, res, direction, ctx)
             unexplained = ctx.glitch
