@@ -87,8 +87,8 @@ def _apply_affine(M, p):
     return p @ M[:, :2].T + M[:, 2]
 
 
-#: An affine map of neighbours is trusted only when each of its points is checked by the
-#: others: a point whose leverage in the fit (its hat-matrix diagonal, 1 for a point that
+#: :func:`_one_out` leaves a point out only when each of the others is checked by the
+#: rest: a point whose leverage in their fit (its hat-matrix diagonal, 1 for a point that
 #: alone fixes a direction, e.g. off the line the others lie on) is above this is fitted
 #: whatever its error (:func:`_max_leverage`). (Five points spread at random have a
 #: largest leverage of 0.90 in the median, 0.99 at the 95th percentile; a dot alone on its
@@ -101,9 +101,10 @@ def _max_leverage(src):
     fit: how much of a point's own error its fitted value follows. Near 1 for a point that
     no other point checks: on a grid of dots the neighbours often lie on two rows, one of
     them a single dot, and any displacement of that dot - a wrong match on the next dot of
-    its row - fits exactly (real dots, dropped, DEV seed 610 cam1, frame 1: the map of six
-    neighbours, a dot leaving the view matched on its row neighbour's blob among them,
-    fitted at 0.19 px and sent two wide-searched dots along their row, ok 25-50 px off).
+    its row - fits exactly (real dots, dropped, DEV seed 610 cam1, frame 1: of six
+    neighbours on two rows, a dot leaving the view had matched its row neighbour's blob;
+    :func:`_one_out` left out the right dot of that row, the other five fitted at 0.19 px,
+    and the map sent two wide-searched dots along their row, ok 25-50 px off).
     Written by hand: a three-column SVD; no library gives the hat matrix of a fit."""
     n = len(src)
     if n <= 3:
@@ -143,7 +144,7 @@ def _one_out(src, dst, tol):
     return best if best_rms <= tol and best_rms < 0.5 * rms_all else -1
 
 
-def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False, inliers=False):
+def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False):
     """Affine src -> dst with outlier rejection; optionally also the inliers' RMS residual.
 
     With ``one_out``, the iterations start without the one point :func:`_one_out` finds
@@ -169,10 +170,10 @@ def _robust_affine(src, dst, iters=3, tol=2.0, quality=False, one_out=False, inl
     if not quality:
         return M
     if M is None:
-        return (None, np.inf, 0, keep) if inliers else (None, np.inf, 0)
+        return None, np.inf, 0
     res = np.linalg.norm(_apply_affine(M, src[keep]) - dst[keep], axis=1)
     rms = float(np.sqrt(np.mean(res**2))) if keep.sum() > 3 else (0.0 if keep.sum() == 3 else np.inf)
-    return (M, rms, int(keep.sum()), keep) if inliers else (M, rms, int(keep.sum()))
+    return M, rms, int(keep.sum())
 
 
 def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.inf):
@@ -180,8 +181,7 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
 
     ``prev``, ``now`` : (m, 2) positions of up to six nearest neighbours, nearest first.
     A robust affine map when four or more of them agree with one (RMS <= 1.5 px; a single
-    gross outlier is left out first, :func:`_one_out`) and each of those is checked by the
-    others (:func:`_max_leverage`), else
+    gross outlier is left out first, :func:`_one_out`), else
     the mean displacement of the largest group that moved alike (within 2 px + 10 %: all
     of them when there are two or three, at least three otherwise; a single neighbour's
     displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
@@ -192,8 +192,8 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
     """
     m = len(prev)
     if m >= 4:
-        M, rms, nin, keep = _robust_affine(prev, now, quality=True, one_out=True, inliers=True)
-        if M is not None and nin >= 4 and rms <= 1.5 and _max_leverage(prev[keep]) <= MAX_POINT_LEVERAGE:
+        M, rms, nin = _robust_affine(prev, now, quality=True, one_out=True)
+        if M is not None and nin >= 4 and rms <= 1.5:
             return _apply_affine(M, p0[None, :])[0], 2.5
     if m < max(min_m, 1):
         return None
