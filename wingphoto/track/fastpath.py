@@ -471,10 +471,10 @@ def _build(key):
         """One steady frame of :meth:`Tracker.step` (see the module docstring).
 
         ``fpar``: min_mass_ratio, min_score, max_sigma, _FADED, _WEAK, _BG_RESIDUAL_FADED,
-        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX, _MOVING_PX. Returns 0 when the frame was
-        handled (state committed, row ``t`` of ``res_*`` written, ``pos`` the new
-        positions), -1 when it was handled and templates are due for an update (``upd``),
-        else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
+        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX,
+        _MOVING_PX. Returns 0 when the frame was handled (state committed, row ``t`` of
+        ``res_*`` written, ``pos`` the new positions), -1 when it was handled and templates
+        are due for an update (``upd``), else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
         the outcome in ``stats``.
         """
         if key < 0:  # (never: ties the compiled code to the stage kernels' sources)

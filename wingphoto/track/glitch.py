@@ -183,15 +183,14 @@ class GlitchStage:
         :meth:`_recover`); a marker found where predicted under one of them (its limit plus
         ``_DROP_TOL`` per frame, or as near as this frame's solve found it; ``min_score``)
         more than half its spacing from where this frame's solve put it has two readings
-        that nothing tells apart: its point is
-        flagged ``constellation`` (``ctx.unexplained``) and, not fed, it coasts. A dot alone
+        that nothing tells apart: its point is flagged ``constellation``
+        (``ctx.unexplained``) and, not fed, it coasts. A dot alone
         on a grid moving a third of its spacing a frame is in doubt on every frame: three
         frames dropped unseen put the dot behind where the next step was predicted (real
         dots, dropped: DEV seed 11 cam1, 8 points; fresh seed 145 cam2 and stress seed 573
         cam1, one point each, 33-35 px off; in 573 the dot behind lay 6.0 px from the
         prediction, ok as a lone marker's short jump, and its own dot 3.6 px from that of
-        "3 dropped"). Returns the frame's context, solved again as
-        it was."""
+        "3 dropped"). Returns the frame's context, solved again as it was."""
         saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
         chk = (ctx.fits & (self.nh >= 2) & (ctx.gap <= 2)).nonzero()[0]
         X0, Y0, r0 = ctx.X.copy(), ctx.Y.copy(), ctx.resid.copy()
@@ -247,24 +246,20 @@ class GlitchStage:
         previous frame (every point of the history but the newest moved that many frames
         back: a motion model fed across a frame it did not see, or told one frame too few
         were dropped, overshoots on the next; real dots, DEV seeds 494 cam2 and 610 cam2).
-        A dropped-frames hypothesis extrapolates further, so its markers may be ``_DROP_TOL`` px per frame
-        dropped further from their predictions. The hypothesis that puts the most
+        A dropped-frames hypothesis extrapolates further, so its markers may be
+        ``_DROP_TOL`` px per frame dropped further from their predictions. The hypothesis that puts the most
         markers where predicted (ties: the smaller median residual) wins if it puts most
         of them there, and is kept for the next frames (after frames dropped, behind the
         measured history, :meth:`_keep_measured`; after a repeat, a frame later,
-        :meth:`_relabel_repeat`); without one, every point of the
-        frame is flagged ``constellation`` and the motion model coasts over it.
+        :meth:`_relabel_repeat`); without one, every point of the frame is flagged
+        ``constellation`` and the motion model coasts over it.
         """
         saved = (self.hist_x.copy(), self.hist_t.copy(), self.lostflag.copy(), self.ref_pos.copy())
         moving = self._moving_now()  # (before a hypothesis moves the histories along)
         fast = self._moving_now(_STALL_SPEED)
-        hyps = [(dt, 0.0, 0.0, 0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0, 0)]
-        if not self._stalled(ctx):
-            # (frames dropped before the last one slow the markers down, never to a stop: on
-            # a frame where the fast ones stand where they were, a repeat with new noise, "2
-            # dropped before the last one" won by one marker more at a median of 1.32 px
-            # against the repeat's 0.04 - real dots, repeated, DEV seed 9 cam2)
-            hyps += [(0, 0.0, 0.0, k) for k in range(1, _MAX_LATE + 1)]
+        hyps = ([(dt, 0.0, 0.0, 0) for dt in range(1, _MAX_DROPPED + 1)] + [(-1, 0.0, 0.0, 0)]
+                + [(0, 0.0, 0.0, k) for k in range(1, _MAX_LATE + 1)])
+        repeat_fits = False  # (a repeat explains the frame: see below)
         prev, prev2 = self._prev, self._prev2
         if prev is not None and prev.shape == frame.shape:
             # the image's global shift holds the camera's jump and the wing's own motion:
@@ -293,6 +288,12 @@ class GlitchStage:
         refined = set()
         dropped_good = {}  # markers where predicted, per count of dropped frames
         for dt, dx, dy, late in hyps:
+            if late and repeat_fits:
+                # (frames dropped before the last one slow the markers down, never to a
+                # stop: on a repeat with new noise, "2 dropped before the last one" won by
+                # one marker more, 31 of 32, at a median of 1.34 px against the repeat's
+                # 0.04 - real dots, repeated, DEV seed 9 cam2)
+                continue
             self._set_model(saved, dt, dx, dy, direction, late)
             c = self._solve(frame, t, aged=dt)
             n, good = self._consistent(c, _DROP_TOL * abs(dt))
@@ -323,6 +324,7 @@ class GlitchStage:
                 # it did not see is the hypothesis of frames dropped before the last one.
                 logger.debug("frame %d: the markers moved on: not a repeated frame", t)
                 continue
+            repeat_fits |= dt < 0 and n >= 3 and good >= _CONSTELLATION * max(n, n0)
             # (most of the markers checkable as predicted, not only of those still found:
             # a hypothesis of many dropped frames sends most predictions off the image or
             # off any blob, and "6 frames dropped" won on 4 of the 7 markers it left
@@ -507,9 +509,9 @@ class GlitchStage:
         model fed across a dropped frame it did not see overshoots (a disc 3.2 px on where
         1.5 were predicted, 1.8 px further on the next frame), which the hypothesis of
         frames dropped before the last one explains, and :meth:`_recover` asks a repeat
-        for a median residual of at most ``STALL_PX`` besides. Behind is a reversal, which no repeat explains: real dots on
-        a grid whose stroke reversed just after three unseen dropped frames came back 2.8
-        px against a prediction 7 px on; "a repeated frame" put them within the motion
+        for a median residual of at most ``STALL_PX`` besides. Behind is a reversal, which
+        no repeat explains: real dots on a grid whose stroke reversed just after three
+        unseen dropped frames came back 2.8 px against a prediction 7 px on; "a repeated frame" put them within the motion
         model's limit (median 1.9 px), was kept for two frames, and on the next the
         model, a stroke behind, put 17 dots one grid spacing off (DEV seed 13 cam1,
         source frames 5-7 dropped: ok 35-72 px off)."""

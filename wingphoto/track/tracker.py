@@ -138,7 +138,7 @@ class FrameContext:
     shift : (2,) ndarray of float
         The camera's shift (px) measured on this frame (:meth:`Tracker._recover`; zero
         without a bump): the image moved by it besides the markers' own motion.
-    measured : tuple of ndarray or None
+    measured : tuple of ndarray
         After frames dropped (:meth:`Tracker._recover`): the motion model's measured
         history before them, (N, 3, 2) positions and (N, 3) frames moved back by the
         frames dropped; the markers fed on this frame keep it behind their new point
@@ -463,7 +463,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         :meth:`_frame_glitch`), prediction and search plan (:func:`~.predict.start_frame`),
         matching and sub-pixel refinement (:meth:`_solve`), the constellation check (when
         most markers left their predictions together: a dropped frame, a bumped camera,
-        :meth:`_recover`), the status rules (:meth:`_judge`), then the motion-model and
+        :meth:`_recover`; with one or two markers to check, whether frames dropped would
+        put them on other blobs, :meth:`_few_in_doubt`), the status rules (:meth:`_judge`), then the motion-model and
         template update and the re-acquisition of lost markers (:meth:`_update`). What
         one frame computes travels in its :class:`FrameContext` (``ctx``), passed to each
         stage; the tracker keeps only the state that persists from frame to frame.
