@@ -94,6 +94,8 @@ def _constellation(n_still=10, n_moving=6, speed=6.0, nh_moving=3):
                          nh=np.array([3] * n_still + [nh_moving] * n_moving),
                          resid_rms=np.full(n, 0.2), p=TrackOptions())
     tr._consistent = Tracker._consistent.__get__(tr)
+    tr._checkable = Tracker._checkable.__get__(tr)
+    tr._where_predicted = Tracker._where_predicted.__get__(tr)
     tr._moving_now = Tracker._moving_now.__get__(tr)
     tr._stalled = Tracker._stalled.__get__(tr)
     resid = np.r_[np.full(n_still, 0.1), np.full(n_moving, speed)]

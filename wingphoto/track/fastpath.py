@@ -365,14 +365,15 @@ def _build(key):
                     if dtm > 0 and np.hypot(hx[i, 0, 0] - hx[i, 1, 0], hx[i, 0, 1] - hx[i, 1, 1]) >= fpar[12] * dtm:
                         return 8
         # (... or their median residual is too large: glitch._median_residual)
-        rfit = np.empty(n)
-        nfit = 0
-        for i in range(n):
-            if fits[i] and nh[i] >= 2 and not np.isnan(resid[i]):
-                rfit[nfit] = resid[i]
-                nfit += 1
-        if nchk >= 3 and nfit > 0 and np.median(rfit[:nfit]) > fpar[11]:
-            return 8
+        if nchk >= 3:
+            rfit = np.empty(n)
+            nfit = 0
+            for i in range(n):
+                if fits[i] and nh[i] >= 2 and not np.isnan(resid[i]):
+                    rfit[nfit] = resid[i]
+                    nfit += 1
+            if nfit > 0 and np.median(rfit[:nfit]) > fpar[11]:
+                return 8
         # ---- sigma (Tracker._sigma) and the status rules (Tracker._judge)
         sig = np.empty(n)
         imprecise = np.empty(n, np.bool_)
@@ -474,8 +475,8 @@ def _build(key):
         _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX,
         _MOVING_PX. Returns 0 when the frame was handled (state committed, row ``t`` of
         ``res_*`` written, ``pos`` the new positions), -1 when it was handled and templates
-        are due for an update (``upd``), else the code of :data:`BAIL_REASONS` that sent it back, nothing changed. Counts
-        the outcome in ``stats``.
+        are due for an update (``upd``), else the code of :data:`BAIL_REASONS` that sent it
+        back, nothing changed. Counts the outcome in ``stats``.
         """
         if key < 0:  # (never: ties the compiled code to the stage kernels' sources)
             return 11

@@ -464,8 +464,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         matching and sub-pixel refinement (:meth:`_solve`), the constellation check (when
         most markers left their predictions together: a dropped frame, a bumped camera,
         :meth:`_recover`; with one or two markers to check, whether frames dropped would
-        put them on other blobs, :meth:`_few_in_doubt`), the status rules (:meth:`_judge`), then the motion-model and
-        template update and the re-acquisition of lost markers (:meth:`_update`). What
+        put them on other blobs, :meth:`_few_in_doubt`), the status rules (:meth:`_judge`),
+        then the motion-model and template update and the re-acquisition of lost markers (:meth:`_update`). What
         one frame computes travels in its :class:`FrameContext` (``ctx``), passed to each
         stage; the tracker keeps only the state that persists from frame to frame.
         """
