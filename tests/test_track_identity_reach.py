@@ -29,7 +29,7 @@ def test_a_rigid_shift_reaches_any_distance():
 
 def test_a_turning_pair_far_away_is_no_good_judge():
     q, lim = _neighbour_prediction(MARKER, PREV, NOW)
-    q2, lim2 = _neighbour_prediction(MARKER, PREV, NOW, reach=True)
+    q2, lim2, vouch = _neighbour_prediction(MARKER, PREV, NOW, reach=True)
     assert np.allclose(q, q2) and lim == pytest.approx(3.93, abs=0.01)
     gap = math.hypot(*((NOW - PREV)[0] - (NOW - PREV)[1])) / math.hypot(*(PREV[0] - PREV[1]))
     near = np.hypot(*(PREV - MARKER).T).min()
@@ -93,3 +93,32 @@ def test_a_miss_beyond_even_that_tolerance_is_still_inconsistent():
     # a tolerance of 4.9 px, was left to its own motion model, which had followed it there)
     bad, good = _stage((309.3 + 20.0, 317.8 + 15.0))
     assert bad.tolist() == [0] and good.size == 0
+
+
+# Independent renderer, dropped, DEV seed 2 left, frame 84 (session 25): two neighbours on
+# the leading edge, ok on frames 80 and 84, 26 px apart; the marker, 28 px off that edge,
+# re-acquired on frame 80, had slipped onto a lost neighbour's blob at 83. The wing pitched
+# about the edge: the pair moved 2.5 px unlike, the marker 12 px unlike the nearer one.
+EDGE_PREV = np.array([[231.9, 351.0], [215.5, 330.5]])
+EDGE_NOW = np.array([[227.1, 353.8], [208.8, 335.0]])
+EDGE_MARKER = np.array([259.9, 347.8])  # frame 80
+SLIPPED, TRUTH = np.array([253.4, 356.0]), np.array([265.2, 343.3])  # frame 84
+
+
+def test_a_pair_along_an_edge_does_not_vouch_for_a_marker_off_it():
+    q, lim, vouch = _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_NOW, reach=True)
+    assert np.hypot(*(SLIPPED - q)) < lim < 0.4 * 15.0  # it would have vouched there ...
+    assert not vouch  # ... but says nothing across the edge it lies along
+    assert np.hypot(*(TRUTH - q)) > lim  # (the truth was 9 px from its prediction)
+    # a marker further along the edge, or one that moved rigidly with the pair, is judged
+    along = EDGE_PREV[1] + 0.8 * (EDGE_PREV[1] - EDGE_PREV[0])
+    assert _neighbour_prediction(along, EDGE_PREV, EDGE_NOW, reach=True)[2]
+    assert _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_PREV + [-5.0, 3.0], reach=True)[2]
+
+
+def test_a_marker_off_a_pitching_edge_is_not_vouched_onto_a_neighbours_blob(independent_case):
+    # the sequence of the pair above: vouched for on frame 84, the marker stayed ok on the
+    # lost neighbour's blob to the end (16 points 16-19 px off)
+    bad, share = independent_case("dropped", 2, "left", 100)
+    assert not bad, bad[:10]
+    assert share > 0.6

@@ -309,3 +309,16 @@ def test_a_dot_alone_is_flagged_when_dropped_frames_would_put_it_on_another_dot(
     # a dot that one of them puts on another blob as near its prediction.
     a = _glitched_errors("dropped", camera, seed)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+
+
+@pytest.mark.parametrize("seed, min_ok", [(568, 500), (631, 30)])
+def test_a_dim_face_behind_a_streaked_highlight_is_seen(seed, min_ok):
+    # DEV stress seeds 441-640, session 25, dropped cam1: fast dots whose specular spot,
+    # streaked by motion blur, outshone their dim face at every cut taken from the
+    # contrast; the centre followed the streak, ok 1.1-1.4 px off at sigma 0.17-0.24 (568:
+    # 4 points, 631: 5). The centre of the whole face, faint pixels included
+    # (refine.LOW_CUT_NOISE), enters sigma: imprecise, not ok. min_ok: the other dots stay
+    # ok (measured 610 and 40; before, 647 and 48 with the errors).
+    a = _glitched_errors("dropped", "cam1", seed)
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"].sum() >= min_ok

@@ -187,14 +187,18 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
     displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
     (px), or None when the neighbours do not move together. With ``reach``, the mean
     displacement's tolerance also grows with how far the marker is from the group times
-    how differently the group moved (:func:`_reach`). A mean displacement that may miss
-    the marker by more than ``max_reach`` px (:func:`_reach`) predicts nothing.
+    how differently the group moved (:func:`_reach`), and a third value says whether the
+    prediction may vouch for the marker: not when the group lies along a line the marker
+    is off (:data:`REACH_ACROSS`) and moved unlike (a miss beyond the tolerance still
+    condemns). A mean displacement that may miss the marker by more than ``max_reach`` px
+    (:func:`_reach`) predicts nothing.
     """
     m = len(prev)
     if m >= 4:
         M, rms, nin = _robust_affine(prev, now, quality=True, one_out=True)
         if M is not None and nin >= 4 and rms <= 1.5:
-            return _apply_affine(M, p0[None, :])[0], 2.5
+            q = _apply_affine(M, p0[None, :])[0]
+            return (q, 2.5, True) if reach else (q, 2.5)
     if m < max(min_m, 1):
         return None
     D = now - prev
@@ -211,8 +215,19 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
         if miss > max_reach:
             return None
         if reach:
-            lim += miss
+            grp = prev[alike[j]]
+            vouch = miss == 0 or len(grp) < 2 or not _off_the_line(p0, grp)
+            return p0 + dm, lim + miss, vouch
     return p0 + dm, lim
+
+
+#: A group whose members lie along a line measures how the displacement changes along
+#: that line only: a marker further off the line than the group's own width plus
+#: REACH_ACROSS times the group's length can move in ways the group does not see (a wing
+#: pitching about the line they mark), so the group's mean move may miss it by more
+#: than :func:`_reach` says: it can condemn such a marker, not vouch for it
+#: (:func:`_neighbour_prediction` with ``reach``).
+REACH_ACROSS = 0.5
 
 
 def _reach(p0, prev, D):
@@ -233,5 +248,16 @@ def _reach(p0, prev, D):
     pair = dP > 0
     grad = float((dD[pair] / dP[pair]).max()) if pair.any() else 0.0
     return grad * float(np.hypot(prev[:, 0] - p0[0], prev[:, 1] - p0[1]).min())
+
+
+def _off_the_line(p0, prev):
+    """Whether ``p0`` lies off the principal line of the points ``prev`` by more than their
+    width across it plus :data:`REACH_ACROSS` times their length along it."""
+    c = prev.mean(axis=0)
+    U = prev - c
+    _, _, vt = np.linalg.svd(U, full_matrices=False)
+    along, across = U @ vt[0], U @ np.array([-vt[0, 1], vt[0, 0]])
+    h = abs(float((p0 - c) @ np.array([-vt[0, 1], vt[0, 0]])))
+    return h > float(np.abs(across).max()) + REACH_ACROSS * float(along.max() - along.min())
 
 

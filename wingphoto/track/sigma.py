@@ -15,7 +15,9 @@ Independent terms, added in quadrature:
   whose plane tilts towards the dark side - the ~1 px confident errors at sigma
   0.2-0.25 of extra DEV seed 11), and, beyond :data:`~.refine.SHAPE_BIN_FLOOR`, when
   every weighted pixel weighs alike (the shape's own centre: a highlight streaked over a
-  small dot, real dots cam1), beyond the ~0.03 px a uniform marker shows;
+  small dot, real dots cam1) and, beyond :data:`~.refine.LOW_CUT_FLOOR`, the centre of
+  every pixel a few noise sigmas up (the whole face: a streaked spot that outshines a dim
+  face), beyond the ~0.03 px a uniform marker shows;
 * texture: the inner face's brightness variation beyond the pixel noise (``tex``: painted
   stripes, a specular highlight), which biases the centre by a fixed, marker-specific
   amount the noise terms do not see;
