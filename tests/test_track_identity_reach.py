@@ -29,7 +29,7 @@ def test_a_rigid_shift_reaches_any_distance():
 
 def test_a_turning_pair_far_away_is_no_good_judge():
     q, lim = _neighbour_prediction(MARKER, PREV, NOW)
-    q2, lim2, vouch = _neighbour_prediction(MARKER, PREV, NOW, reach=True)
+    q2, lim2, _ = _neighbour_prediction(MARKER, PREV, NOW, reach=True)
     assert np.allclose(q, q2) and lim == pytest.approx(3.93, abs=0.01)
     gap = math.hypot(*((NOW - PREV)[0] - (NOW - PREV)[1])) / math.hypot(*(PREV[0] - PREV[1]))
     near = np.hypot(*(PREV - MARKER).T).min()
@@ -106,14 +106,19 @@ SLIPPED, TRUTH = np.array([253.4, 356.0]), np.array([265.2, 343.3])  # frame 84
 
 
 def test_a_pair_along_an_edge_does_not_vouch_for_a_marker_off_it():
-    q, lim, vouch = _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_NOW, reach=True)
-    assert np.hypot(*(SLIPPED - q)) < lim < 0.4 * 15.0  # it would have vouched there ...
-    assert not vouch  # ... but says nothing across the edge it lies along
+    spacing = 15.9  # the marker's
+    q, lim, lim_vouch = _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_NOW, reach=True)
+    assert np.hypot(*(SLIPPED - q)) < lim < 0.4 * spacing  # it would have vouched there ...
+    assert lim_vouch > 0.4 * spacing  # ... but the miss across the edge counts twice
+    assert lim_vouch == pytest.approx(lim + (lim - 2.0 - 0.1 * np.hypot(*(q - EDGE_MARKER))))
     assert np.hypot(*(TRUTH - q)) > lim  # (the truth was 9 px from its prediction)
     # a marker further along the edge, or one that moved rigidly with the pair, is judged
+    # with the tolerance as before
     along = EDGE_PREV[1] + 0.8 * (EDGE_PREV[1] - EDGE_PREV[0])
-    assert _neighbour_prediction(along, EDGE_PREV, EDGE_NOW, reach=True)[2]
-    assert _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_PREV + [-5.0, 3.0], reach=True)[2]
+    _, lim, lim_vouch = _neighbour_prediction(along, EDGE_PREV, EDGE_NOW, reach=True)
+    assert lim_vouch == lim
+    _, lim, lim_vouch = _neighbour_prediction(EDGE_MARKER, EDGE_PREV, EDGE_PREV + [-5.0, 3.0], reach=True)
+    assert lim_vouch == lim < 0.4 * spacing
 
 
 def test_a_marker_off_a_pitching_edge_is_not_vouched_onto_a_neighbours_blob(independent_case):

@@ -187,9 +187,9 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
     displacement when ``min_m`` is 1). Returns the predicted position and its tolerance
     (px), or None when the neighbours do not move together. With ``reach``, the mean
     displacement's tolerance also grows with how far the marker is from the group times
-    how differently the group moved (:func:`_reach`), and a third value says whether the
-    prediction may vouch for the marker: not when the group lies along a line the marker
-    is off (:data:`REACH_ACROSS`) and moved unlike (a miss beyond the tolerance still
+    how differently the group moved (:func:`_reach`), and a third value is the tolerance
+    for vouching for the marker: twice that growth when the group lies along a line the
+    marker is off (:data:`REACH_ACROSS`; a miss beyond the first tolerance still
     condemns). A mean displacement that may miss the marker by more than ``max_reach`` px
     (:func:`_reach`) predicts nothing.
     """
@@ -198,7 +198,7 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
         M, rms, nin = _robust_affine(prev, now, quality=True, one_out=True)
         if M is not None and nin >= 4 and rms <= 1.5:
             q = _apply_affine(M, p0[None, :])[0]
-            return (q, 2.5, True) if reach else (q, 2.5)
+            return (q, 2.5, 2.5) if reach else (q, 2.5)
     if m < max(min_m, 1):
         return None
     D = now - prev
@@ -216,8 +216,8 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
             return None
         if reach:
             grp = prev[alike[j]]
-            vouch = miss == 0 or len(grp) < 2 or not _off_the_line(p0, grp)
-            return p0 + dm, lim + miss, vouch
+            across = miss if len(grp) >= 2 and _off_the_line(p0, grp) else 0.0
+            return p0 + dm, lim + miss, lim + miss + across
     return p0 + dm, lim
 
 
@@ -225,7 +225,7 @@ def _neighbour_prediction(p0, prev, now, min_m=2, reach=False, max_reach=math.in
 #: that line only: a marker further off the line than the group's own width plus
 #: REACH_ACROSS times the group's length can move in ways the group does not see (a wing
 #: pitching about the line they mark), so the group's mean move may miss it by more
-#: than :func:`_reach` says: it can condemn such a marker, not vouch for it
+#: than :func:`_reach` says: to vouch for such a marker, that miss counts twice
 #: (:func:`_neighbour_prediction` with ``reach``).
 REACH_ACROSS = 0.5
 

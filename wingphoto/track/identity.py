@@ -404,10 +404,10 @@ class IdentityStage:
             pq = _neighbour_prediction(Pi, prev, np.column_stack([X[cand], Y[cand]]), min_m, reach=True)
             if pq is None:
                 continue  # the neighbours do not move together: nothing to compare with
-            q, lim, vouch = pq
+            q, lim, lim_vouch = pq
             if math.hypot(X[i] - q[0], Y[i] - q[1]) > max(lim, min_lim):
                 bad.append(i)
-            elif vouch and lim <= ASTRAY_FRACTION * self._spacing[i]:
+            elif lim_vouch <= ASTRAY_FRACTION * self._spacing[i]:
                 good.append(i)
             # (else: so unsure a prediction cannot tell its blob from a neighbour's, and
             # vouches for neither; a miss beyond it still condemns - dropped DEV seed 47

@@ -110,6 +110,7 @@ SHAPE_BIN_GAIN, SHAPE_BIN_FLOOR = 1.0, 0.2
 #: Chosen on the stress seeds: floor 0.6 px left 2 of the 10, 0.5 left 1; 0.4: none,
 #: ok -0.8 % there, -0.02 % on the sweep DEV.
 LOW_CUT_NOISE, LOW_CUT_CONTRAST, LOW_CUT_GAIN, LOW_CUT_FLOOR = 3.0, 0.1, 1.0, 0.4
+LOW_CUT_OPEN = 0.05
 #: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
 #: CONTRAST_FACE times its face - the median of its disk pixels above CONTRAST_FLOOR of the
 #: peak (and 3 noise sigmas). A small bright highlight on a dim face (real dots: a specular
@@ -321,6 +322,9 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         if wfrac > 0:
             lcut = np.maximum(LOW_CUT_NOISE * np.asarray(noise, np.float32), LOW_CUT_CONTRAST * contrast)
             low = (disk | (ring & ~out)) & (res > lcut[:, None]) & ~dark.any(1)[:, None]
+            # (not a face that runs out of the ring: a membrane, a glare ridge)
+            outer = ring & (d2 > (r + 1.0) ** 2)
+            low &= ((low & outer).sum(1) <= LOW_CUT_OPEN * outer.sum(1))[:, None]
             dl = (low @ grid.gxy) / low.sum(1)[:, None]
             ml = np.hypot(dl[:, 0] - d[:, 0], dl[:, 1] - d[:, 1])
             dshape = np.hypot(dshape, LOW_CUT_GAIN * np.maximum(np.nan_to_num(ml) - LOW_CUT_FLOOR, 0.0))
@@ -602,11 +606,21 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
             flat = cut + SHAPE_CLIP * (med - cut)
     lcut = max(LOW_CUT_NOISE * noise_i, LOW_CUT_CONTRAST * contrast) if not found else np.inf
     ln = lu = lv = 0.0
+    no = nlo = 0.0
+    ro2 = (r + 1.0) * (r + 1.0)
     for k in range(nr):
-        if routl[k] == 0 and rval[k] - (pa + pb * ru[k] + pc * rv[k]) > lcut:
+        low = routl[k] == 0 and rval[k] - (pa + pb * ru[k] + pc * rv[k]) > lcut
+        if ru[k] * ru[k] + rv[k] * rv[k] > ro2:
+            no += 1.0
+            if low:
+                nlo += 1.0
+        if low:
             ln += 1.0
             lu += ru[k]
             lv += rv[k]
+    if nlo > LOW_CUT_OPEN * no:
+        lcut = np.inf  # (a face that runs out of the ring: a membrane, a glare ridge)
+        ln = lu = lv = 0.0
     mass = 0.0
     sw = swx = swy = 0.0
     nw = su = sv = suu = svv = 0.0
