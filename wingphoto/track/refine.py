@@ -106,9 +106,12 @@ SHAPE_BIN_GAIN, SHAPE_BIN_FLOOR = 1.0, 0.2
 #: 0.17-0.24, the low-cut centre 0.5-1.3 px from theirs). Not where the edge rule chose
 #: the background (the membrane beyond an edge is "above" the dark side's plane), and
 #: the contrast share keeps a membrane edge or glare that the plane leaves in the ring
-#: out (without it, clean_glare DEV lost 1.2 % of its ok points, edge_on 12 %).
-#: Chosen on the stress seeds: floor 0.6 px left 2 of the 10, 0.5 left 1; 0.4: none,
-#: ok -0.8 % there, -0.02 % on the sweep DEV.
+#: out (without it, clean_glare DEV lost 1.2 % of its ok points, edge_on 12 %); nor
+#: where more than LOW_CUT_OPEN of the ring's outer pixels are above the cut - a face
+#: runs out of the ring there, a membrane beyond an edge a few px away (the independent
+#: renderer's clean DEV: 8-15 % of them, the low-cut centre ~1 px off good points; the
+#: dim faces of the stress seeds: none). Chosen on the stress seeds: floor 0.6 px left
+#: 2 of the 10, 0.5 left 1; 0.4: none. docs/tracker.md has the cost in ok points.
 LOW_CUT_NOISE, LOW_CUT_CONTRAST, LOW_CUT_GAIN, LOW_CUT_FLOOR = 3.0, 0.1, 1.0, 0.4
 LOW_CUT_OPEN = 0.05
 #: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
