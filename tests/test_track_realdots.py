@@ -329,8 +329,8 @@ def test_a_grid_moving_half_its_spacing_is_not_aliased_on_the_first_frame():
     # ~15 px from frame 0 to 1 on a 29 px grid. With no velocity yet, those leaving the
     # view took the next dots 19-23 px away, unambiguous, anchored their neighbours'
     # consensus, and a whole corner started one spacing back (ok 31-92 px off, in every
-    # glitch kind). A first match half a spacing from the pick now anchors nothing and is
-    # flagged (IdentityStage._consensus).
+    # glitch kind). A wide match half a spacing or more from where the marker was now
+    # anchors no other marker's consensus (IdentityStage._consensus).
     a = _glitched_errors("none", "cam1", 680)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
-    assert a["ok"].sum() > 600  # (measured 798)
+    assert a["ok"].sum() > 600  # (measured 783)

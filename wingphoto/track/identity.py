@@ -578,15 +578,14 @@ class IdentityStage:
         amb = (second >= score - p.ambiguity_margin) | (score < p.min_score)
         good = wsel & ~amb
         # a match half a spacing or more from where the marker was may be the next blob of
-        # a regular grid: it anchors no other marker, and nothing vouches for it (real
-        # dots, fresh DEV seed 680 cam1, frame 1: dots ~15 px/frame on a 29 px grid; those
-        # leaving the view took the next dots 19-23 px away, unambiguous, and their
-        # neighbours followed them one spacing back: ok 31-92 px off)
-        jump = np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) >= 0.5 * self._spacing[idx]
-        far = good & jump
-        unvouched[idx[far]] = True
-        good &= ~jump
-        ax[idx[good]], ay[idx[good]] = mx[good], my[good]
+        # a regular grid: it anchors no other marker, and only anchors that are not such
+        # matches vouch for it (real dots, fresh DEV seed 680 cam1, frame 1: dots ~15
+        # px/frame on a 29 px grid; those leaving the view took the next dots 19-23 px
+        # away, unambiguous, and their neighbours followed them one spacing back: ok 31-92
+        # px off)
+        far = np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) >= 0.5 * self._spacing[idx]
+        anchor = good & ~far
+        ax[idx[anchor]], ay[idx[anchor]] = mx[anchor], my[anchor]
         anchors = np.flatnonzero(np.isfinite(ax))
         redo, qs = [], []
         for k in np.flatnonzero(wsel).tolist():
