@@ -208,7 +208,7 @@ def _texture(sig, inner, noise):
         return np.where((cnt > 0) & (m1 > 0), np.sqrt(ex) / m1, 0.0)
 
 
-def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION):
+def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_FRACTION, face=True):
     """One background-subtracted centroid pass around integer pixels (ix, iy).
 
     rd : (n,) disk radius (px); the background plane is fitted on the 2 px ring outside.
@@ -217,6 +217,8 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
     noise : (n,) noise sigma (grey levels) of each marker's neighbourhood.
     nbr_r : (n,) radius of the neighbour's blob (its disk radius): bright ring pixels
         within it are explained by the neighbour, not foreign.
+    face : bool, the low-cut part of ``dshape`` (:data:`LOW_CUT_NOISE`; not on the inner
+        disk, whose ring is near the structure it was shrunk away from).
 
     Returns a dict: d (n, 2) offset of the centroid from (ix, iy), mass, peak (largest
     background-subtracted value in the disk), rsup (distance from the centroid of the
@@ -322,7 +324,7 @@ def _centroid_pass(frame, ix, iy, rd, sign, nb, noise, nbr_r=None, wfrac=WEIGHT_
         mb = np.hypot(db[:, 0] - d[:, 0], db[:, 1] - d[:, 1])
         dshape = np.hypot(dshape, SHAPE_BIN_GAIN * np.maximum(np.nan_to_num(mb) - SHAPE_BIN_FLOOR, 0.0))
         # ... and to the centre of the whole face, faint parts included (LOW_CUT_NOISE)
-        if wfrac > 0:
+        if wfrac > 0 and face:
             lcut = np.maximum(LOW_CUT_NOISE * np.asarray(noise, np.float32), LOW_CUT_CONTRAST * contrast)
             low = (disk | (ring & ~out)) & (res > lcut[:, None]) & ~dark.any(1)[:, None]
             # (not a face that runs out of the ring: a membrane, a glare ridge)
@@ -512,7 +514,8 @@ def _contrast_kernel(du, dv, dval, nd, pa, pb, pc, peak, noise_i, scratch, lo):
 
 
 @jit
-def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl, qm, rabs):
+def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, dval, ru, rv, rval, routl, qm, rabs,
+           face):
     """One centroid pass of one marker (the compiled twin of :func:`_centroid_pass`).
 
     Returns dx, dy, mass, peak, nout (not explained by the neighbour), frac, dip, omin,
@@ -607,7 +610,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
             med = _median_inplace(rval, nr, nl)
             level = CLIP_LEVEL * med
             flat = cut + SHAPE_CLIP * (med - cut)
-    lcut = max(LOW_CUT_NOISE * noise_i, LOW_CUT_CONTRAST * contrast) if not found else np.inf
+    lcut = max(LOW_CUT_NOISE * noise_i, LOW_CUT_CONTRAST * contrast) if face and not found else np.inf
     ln = lu = lv = 0.0
     no = nlo = 0.0
     ro2 = (r + 1.0) * (r + 1.0)
@@ -765,7 +768,7 @@ def _buffers(rd):
 
 
 @jit
-def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rmax, wfrac, ff, fn, out):
+def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rmax, wfrac, ff, fn, out, face):
     """Compiled twin of :func:`_refine_core` (the iterated centroid of each marker);
     ``out`` (n, 12) receives x, y, mass, peak, foreign, bgres, valley, the disk radius,
     the spread, dshape, rim and tex."""
@@ -788,7 +791,7 @@ def _refine_kernel(frame, x, y, rd, sign, noise, nbx, nby, nbr_r, iterations, rm
             nx_ = nbx[i] - cx
             ny_ = nby[i] - cy
             res = _pass1(frame, cx, cy, r, sign[i], nx_, ny_, noise[i], nbr_r[i], wfrac, ff, fn,
-                         du, dv, dval, ru, rv, rval, routl, qm, rabs)
+                         du, dv, dval, ru, rv, rval, routl, qm, rabs, face)
             dx, dy, m, pk, nout, frac, dip, omin, b, vl, spread, dshape, rim, tex, second = res
             good = m > 0
             if good:
@@ -903,7 +906,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
         while True:
             dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx, sec = _pass1(
                 frame, cx, cy, r, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
-                du, dv, dval, ru, rv, rval, routl, qm, rabs)
+                du, dv, dval, ru, rv, rval, routl, qm, rabs, True)
             good = m > 0
             if good:
                 xi = cx + dx
@@ -932,7 +935,7 @@ def _refine_all_kernel(frame, idx, XP, YP, jn, rd, rb, sign, noise, iterations, 
             for it in range(iterations):
                 dx, dy, m, pk, nout, frac, dip, omin, b, vl, sp, dsh, rm, tx, sec = _pass1(
                     frame, cx, cy, r - INNER_SHRINK, sign[i], nxa - cx, nya - cy, noise[i], rr, wfrac, ff, fn,
-                    du, dv, dval, ru, rv, rval, routl, qm, rabs)
+                    du, dv, dval, ru, rv, rval, routl, qm, rabs, False)
                 if not m > 0:
                     break
                 kx = min(max(int(np.rint(cx + dx)), 0), W - 1)
@@ -995,7 +998,7 @@ def _find_foreign(frame, ix, iy, rd, sign, peak):
     return out
 
 
-def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac):
+def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac, face=True):
     """Iterated centroid passes (numpy); see :func:`_refine`. Returns x, y, mass, rd,
     peak, foreign, bgres, valley."""
     x = np.array(x, dtype=np.float64)
@@ -1023,7 +1026,7 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
         if nbr_xy is not None:
             nb = (nbr_xy[todo] - np.column_stack([jx, jy])).astype(np.float32)
         r = _centroid_pass(frame, jx, jy, rd[todo], sign[todo], nb, noise[todo],
-                           None if nbr_r is None else nbr_r[todo], wfrac)
+                           None if nbr_r is None else nbr_r[todo], wfrac, face)
         d, m = r["d"], r["mass"]
         good = m > 0
         nx = np.where(good, jx + d[:, 0], x[todo])
@@ -1049,7 +1052,7 @@ def _refine_core(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, 
     return x, y, mass, rd, peak, foreign, bgres, valley, spread, dshape, rim, tex
 
 
-def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac):
+def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, rmax, wfrac, face=True):
     """:func:`_refine_core` by the compiled kernel."""
     n = len(x)
     out = np.empty((n, 12))
@@ -1061,7 +1064,7 @@ def _refine_core_fast(frame, x, y, rd, sign, noise, nbr_xy, nbr_r, iterations, r
     rr = np.full(n, np.nan) if nbr_r is None else np.ascontiguousarray(nbr_r, dtype=np.float64)
     _refine_kernel(frame, np.asarray(x, np.float64), np.asarray(y, np.float64), np.asarray(rd, np.float64),
                    np.asarray(sign, np.float64), np.asarray(noise, np.float64), nbx, nby, rr, int(iterations),
-                   np.asarray(rmax, np.float64), float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out)
+                   np.asarray(rmax, np.float64), float(wfrac), FOREIGN_FRACTION, FOREIGN_NOISE, out, bool(face))
     return out[:, 0], out[:, 1], out[:, 2], out[:, 7], out[:, 3], out[:, 4] > 0, out[:, 5], out[:, 6], out[:, 8], out[:, 9], out[:, 10], out[:, 11]
 
 
@@ -1125,7 +1128,7 @@ def _inner_disk(core, frame, x, y, mass, rd, sign, noise, nbr_xy, nbr_r, wfrac, 
         return
     r2 = core(frame, x[rows], y[rows], rd[rows] - INNER_SHRINK, np.asarray(sign)[rows], np.asarray(noise)[rows],
               None if nbr_xy is None else nbr_xy[rows], None if nbr_r is None else np.asarray(nbr_r)[rows], iterations,
-              rd[rows] - INNER_SHRINK, wfrac)
+              rd[rows] - INNER_SHRINK, wfrac, face=False)
     keep = (r2[2] > 0) & (r2[10] <= INNER_RIM) & (r2[6] < bgres[rows])
     rows = rows[keep]
     x[rows], y[rows] = r2[0][keep], r2[1][keep]
