@@ -110,8 +110,11 @@ SHAPE_BIN_GAIN, SHAPE_BIN_FLOOR = 1.0, 0.2
 #: where more than LOW_CUT_OPEN of the ring's outer pixels are above the cut - a face
 #: runs out of the ring there, a membrane beyond an edge a few px away (the independent
 #: renderer's clean DEV: 8-15 % of them, the low-cut centre ~1 px off good points; the
-#: dim faces of the stress seeds: none). Chosen on the stress seeds: floor 0.6 px left
-#: 2 of the 10, 0.5 left 1; 0.4: none. docs/tracker.md has the cost in ok points.
+#: dim faces of the stress seeds: none). Nor on the inner disk (:data:`INNER_BGRES`),
+#: whose ring lies near the structure it was shrunk away from (independent clean DEV
+#: seed 2 left, a marker beside the wing's edge: imprecise at sigma 0.26, 0.17 px off).
+#: Chosen on the stress seeds: floor 0.6 px left 2 of the 10, 0.5 left 1; 0.4: none.
+#: docs/tracker.md has the cost in ok points.
 LOW_CUT_NOISE, LOW_CUT_CONTRAST, LOW_CUT_GAIN, LOW_CUT_FLOOR = 3.0, 0.1, 1.0, 0.4
 LOW_CUT_OPEN = 0.05
 #: The centroid's cut is WEIGHT_FRACTION of the marker's contrast: its peak, but at most
