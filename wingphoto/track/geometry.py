@@ -256,8 +256,9 @@ def _off_the_line(p0, prev):
     c = prev.mean(axis=0)
     U = prev - c
     _, _, vt = np.linalg.svd(U, full_matrices=False)
-    along, across = U @ vt[0], U @ np.array([-vt[0, 1], vt[0, 0]])
-    h = abs(float((p0 - c) @ np.array([-vt[0, 1], vt[0, 0]])))
+    normal = np.array([-vt[0, 1], vt[0, 0]])
+    along, across = U @ vt[0], U @ normal
+    h = abs(float((p0 - c) @ normal))
     return h > float(np.abs(across).max()) + REACH_ACROSS * float(along.max() - along.min())
 
 

@@ -613,7 +613,7 @@ class IdentityStage:
                 # extra DEV seed 21 cam2, frame 1: a dot leaving the view took its grid
                 # neighbour's blob 20 px away, unambiguous, while one of its three
                 # neighbours had done the same: ok 30 px off.
-                if good[k] and math.hypot(mx[k] - pred[i, 0], my[k] - pred[i, 1]) >= 0.5 * self._spacing[i]:
+                if good[k] and far[k]:
                     unvouched[i] = True
                 continue
             q, lim = pq

@@ -108,9 +108,9 @@ SHAPE_BIN_GAIN, SHAPE_BIN_FLOOR = 1.0, 0.2
 #: the contrast share keeps a membrane edge or glare that the plane leaves in the ring
 #: out (without it, clean_glare DEV lost 1.2 % of its ok points, edge_on 12 %); nor
 #: where more than LOW_CUT_OPEN of the ring's outer pixels are above the cut - a face
-#: runs out of the ring there, a membrane beyond an edge a few px away (the independent
-#: renderer's clean DEV: 8-15 % of them, the low-cut centre ~1 px off good points; the
-#: dim faces of the stress seeds: none). Nor on the inner disk (:data:`INNER_BGRES`),
+#: runs out of the ring there, a membrane beyond an edge a few px away (a marker of the
+#: independent renderer's clean DEV seed 0 left: 8-15 % of them on its frames, the
+#: low-cut centre ~1 px off its good points; stress seed 568's dim face: none). Nor on the inner disk (:data:`INNER_BGRES`),
 #: whose ring lies near the structure it was shrunk away from (independent clean DEV
 #: seed 2 left, a marker beside the wing's edge: imprecise at sigma 0.26, 0.17 px off).
 #: Chosen on the stress seeds: floor 0.6 px left 2 of the 10, 0.5 left 1; 0.4: none.
@@ -617,7 +617,7 @@ def _pass1(frame, cx, cy, r, sg, nx_, ny_, noise_i, rr, wfrac, ff, fn, du, dv, d
     ln = lu = lv = 0.0
     no = nlo = 0.0
     ro2 = (r + 1.0) * (r + 1.0)
-    for k in range(nr):
+    for k in range(nr if lcut < np.inf else 0):
         low = routl[k] == 0 and rval[k] - (pa + pb * ru[k] + pc * rv[k]) > lcut
         if ru[k] * ru[k] + rv[k] * rv[k] > ro2:
             no += 1.0
