@@ -5,24 +5,36 @@ returns the tidy tracks DataFrame of ``docs/conventions.md``; every point-frame 
 ``flagged`` (a best guess, with a ``reason``) or ``lost``. The design - each choice and
 the failure it prevents - is described in ``docs/tracker.md``.
 
-One stage per module:
+One stage per module (``docs/tracker.md``, *Code map*, says more of each):
 
 ========================  ==============================================================
-``options``               :class:`TrackOptions`: every default and its validation
+``options``               :class:`TrackOptions`: the user's options, their defaults and validation
 ``inputs``                validated frames and picks
-``predict``               motion model: prediction and its update
+``predict``               motion model: prediction, search plan, update
 ``match``                 windowed NCC (:func:`match_windows`), peak analysis
-``refine``                sub-pixel centring (:func:`refine_centroids`)
+``refine``                sub-pixel centring (:func:`refine_centroids`), per-point diagnostics
+``background``            the background under a marker: plane, curvature, edge rule
+``sigma``                 the one sigma formula (compiled and numpy twins)
 ``templates``             templates cut at the refined centre, blended, matched
-``identity``              conflicts, neighbour consensus, vouching
-``status``                statuses, reasons and the status rules
+``identity``              search, conflicts, neighbour consensus, vouching
+``geometry``              nearest neighbours, affine maps, neighbour predictions
+``hop``                   whether a marker's path changed blob while not ok
+``status``                statuses, reasons and the ordered status rules
+``glitch``                blank, repeated and dropped frames, camera bumps
 ``reacquire``             re-acquisition of lost markers from their neighbours
-``checkpoint``            save/resume a run
+``relocate``              re-acquisition of a group lost at once, by its constellation
+``audit``                 the check after tracking: ok points against their neighbours' map
 ``tracker``               :class:`~wingphoto.track.tracker.Tracker`: ``step`` calls the stages
+``fastpath``              a steady frame's whole ``step`` in one compiled call
+``checkpoint``            save/resume a run
+``results``               the per-pass result arrays and the tracks table
 ``driver``                :func:`track_markers`, :func:`retrack_from`
 ``stereo``                :func:`check_stereo`
 ``engine``                the numba/numpy switch (:func:`try_numba`)
 ========================  ==============================================================
+
+Each stage keeps its own constants beside the code that reads them; the user's options
+and their defaults are in one place, :class:`TrackOptions`.
 """
 from __future__ import annotations
 

@@ -107,7 +107,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
         (correlation peak), status (ok / flagged / lost), x_pix, y_pix (pixel-level match,
         NaN where there was none), reason ("" when ok). x, y are NaN when lost; a flagged
         point carries its best guess. Frame 0 holds the refined picks (score 1). Reasons
-        (:data:`REASONS`; module docstring, 7): ``low_score``, ``ambiguous``, ``merged``, ``conflict``,
+        (:data:`REASONS`; ``docs/tracker.md``): ``low_score``, ``ambiguous``, ``merged``, ``conflict``,
         ``jump``, ``no_signal``, ``appearance``, ``edge``, ``out_of_frame``,
         ``lost_track`` (coasted longer than ``max_coast``), ``reacquired`` (first frame
         after a re-acquisition), ``fb_disagree``, ``no_pick``, ``pick_moved`` (frame 0:
@@ -133,8 +133,7 @@ def track_markers(frames, picks, *, camera="left", search_radius=None, max_sigma
 
     Notes
     -----
-    The design and the failure each choice prevents are listed in the module docstring
-    (:mod:`wingphoto.track`). Conventions: ``docs/conventions.md``.
+    The design and the failure each choice prevents are described in ``docs/tracker.md``. Conventions: ``docs/conventions.md``.
 
     Examples
     --------
@@ -506,7 +505,7 @@ def _reverse_tracker(tracker, res, end, k):
     return b
 
 
-def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, conflict_px=3.0,
+def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, conflict_px=GROUP_CONFLICT_PX,
                  progress=True, **options):
     """Re-track some points forward from a (corrected) frame.
 
@@ -560,7 +559,6 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
             f"points {pts[bad].tolist()} have no position on frame {frame}; correct them first "
             "(apply_corrections) and re-track from the corrected frame"
         )
-    progress_opt = options.pop("progress", progress)
     p = _resolve_options(options.pop("options", None), **options)
     tracker = _Tracker.from_picks(fr[frame], seed, np.full(len(pts), -1, np.int64), p, fr.is_u8, pts)
     # the corrected position is the user's: keep it exactly as the seed
@@ -580,7 +578,7 @@ def retrack_from(frames, tracks, points, frame, *, camera=None, stop=None, confl
     res = _Results(fr.n, len(pts))
     res.x[frame], res.y[frame] = seed[:, 0], seed[:, 1]
     res.status[frame] = OK
-    _run_pass(fr, tracker, res, range(frame + 1, stop + 1), 1, None, progress_opt, "retrack")
+    _run_pass(fr, tracker, res, range(frame + 1, stop + 1), 1, None, progress, "retrack")
     new = _tracks_frame(res, pts, camera if camera is not None else "left")
     new = new[(new["frame"] > frame) & (new["frame"] <= stop)]
     out = tracks.copy()

@@ -43,7 +43,7 @@ import numpy as np
 
 from . import engine
 from .match import _analyse_kernel, _climb_kernel, _ncc_kernel, _score_kernel
-from .predict import _history_kernel, _pre_kernel
+from .predict import FAST_VERIFY_PX, FAST_VERIFY_SCORE, _history_kernel, _pre_kernel
 from .refine import FOREIGN_FRACTION, FOREIGN_NOISE, WEIGHT_FRACTION, _refine_all_kernel, split_neighbour_kernel
 from .sigma import point_sigma
 from .status import (
@@ -56,6 +56,8 @@ from .status import (
     FLAGGED,
     LOST,
     OK,
+    STAY_PX,
+    STAY_SCORE,
     _conditions_kernel,
 )
 
@@ -70,6 +72,9 @@ _JUMP = _R["jump"]
 _IMPRECISE = _R["imprecise"]
 _EDGE = _R["edge"]
 _OUT_OF_FRAME = _R["out_of_frame"]
+#: Slots of the fast frame's thresholds ``fpar`` (:func:`_params` fills them).
+(_F_MIN_MASS, _F_MIN_SCORE, _F_MAX_SIGMA, _F_FADED, _F_WEAK, _F_BG_FADED, _F_CONSTELLATION, _F_POOR_MATCH,
+ _F_POOR_DROP, _F_POOR_MARGIN, _F_MEDIAN_RESID, _F_MOVING) = range(12)
 
 #: Modules whose kernels :func:`_fast_frame` calls (their source is part of its cache key).
 _DEPENDENCIES = ("geometry", "predict", "match", "refine", "sigma", "status")
@@ -211,14 +216,14 @@ def _build(key):
                     nw += 1
                     rmax = max(rmax, r[i])
         if rmax > 6:
-            return 4  # a window that OpenCV matches (Templates._match)
+            return 4  # a window that OpenCV matches (TemplateStage._match)
         # the pixels the matching and the refinement will read, fetched together first
         # (a new frame is not in the cache; :func:`_touch`)
         reach = np.empty(n, np.int64)
         for i in range(n):
             reach[i] = max(h[i] + r[i], np.int64(np.ceil(rd[i])) + 3) + 1
         pos[0, 0] = _touch(frame, prx, pry, reach)  # (pos is written again on commit, unused on a bail)
-        # ---- matching (Identity._search, numba branch): hill-climb from the prediction
+        # ---- matching (IdentityStage._search, numba branch): hill-climb from the prediction
         # where the window is small, correlate the whole window elsewhere
         XP = np.full(n, np.nan)
         YP = np.full(n, np.nan)
@@ -271,7 +276,7 @@ def _build(key):
                 S[i] = peaks[k, 2]
                 SEC[i] = peaks[k, 3]
         if ns:
-            # conflicts among the searched markers (Identity._conflicts)
+            # conflicts among the searched markers (IdentityStage._conflicts)
             for a in range(ns):
                 i = sidx[a]
                 for b in range(ns):
@@ -340,7 +345,8 @@ def _build(key):
                 XP[i] = np.rint(X[i])
                 YP[i] = np.rint(Y[i])
                 resf = np.hypot(X[i] - prx[i], Y[i] - pry[i])
-                if not (S[i] >= 0.85 and resf < max(1.0, 4.0 * rrms[i]) and mass[i] > fpar[0] * mass0[i]):
+                if not (S[i] >= FAST_VERIFY_SCORE and resf < max(FAST_VERIFY_PX, 4.0 * rrms[i])
+                        and mass[i] > fpar[_F_MIN_MASS] * mass0[i]):
                     return 7
         resid = np.empty(n)
         for i in range(n):
@@ -352,9 +358,9 @@ def _build(key):
             if fits[i] and nh[i] >= 2 and gap[i] <= 2:
                 nchk += 1
                 lim = max(2.0, 4.0 * rrms[i] + COAST_PX * (gap[i] - 1))
-                if resid[i] <= lim and S[i] >= fpar[1]:
+                if resid[i] <= lim and S[i] >= fpar[_F_MIN_SCORE]:
                     ngood += 1
-        if nchk >= 3 and ngood < fpar[6] * nchk:
+        if nchk >= 3 and ngood < fpar[_F_CONSTELLATION] * nchk:
             return 8
         # (too few markers for a constellation, one of them moving: the Python step asks
         # whether frames dropped would put it on another blob, GlitchStage._few_in_doubt)
@@ -362,7 +368,8 @@ def _build(key):
             for i in range(n):
                 if fits[i] and nh[i] >= 3 and gap[i] <= 2:
                     dtm = abs(ht[i, 0] - ht[i, 1])
-                    if dtm > 0 and np.hypot(hx[i, 0, 0] - hx[i, 1, 0], hx[i, 0, 1] - hx[i, 1, 1]) >= fpar[12] * dtm:
+                    step = np.hypot(hx[i, 0, 0] - hx[i, 1, 0], hx[i, 0, 1] - hx[i, 1, 1])
+                    if dtm > 0 and step >= fpar[_F_MOVING] * dtm:
                         return 8
         # (... or their median residual is too large: glitch._median_residual)
         if nchk >= 3:
@@ -372,7 +379,7 @@ def _build(key):
                 if fits[i] and nh[i] >= 2 and not np.isnan(resid[i]):
                     rfit[nfit] = resid[i]
                     nfit += 1
-            if nfit > 0 and np.median(rfit[:nfit]) > fpar[11]:
+            if nfit > 0 and np.median(rfit[:nfit]) > fpar[_F_MEDIAN_RESID]:
                 return 8
         # ---- sigma (Tracker._sigma) and the status rules (Tracker._judge)
         sig = np.empty(n)
@@ -380,8 +387,8 @@ def _build(key):
         for i in range(n):
             sig[i] = point_sigma(noise[i], spread[i], bgres[i], peak[i], S[i], rb[i], dshape[i], rim[i], tex[i],
                                  valley[i])
-            faded = (peak[i] < fpar[3] * peak0[i]) or (S[i] < fpar[4])
-            imprecise[i] = (not (sig[i] <= fpar[2])) or (faded and bgres[i] > fpar[5])
+            faded = (peak[i] < fpar[_F_FADED] * peak0[i]) or (S[i] < fpar[_F_WEAK])
+            imprecise[i] = (not (sig[i] <= fpar[_F_MAX_SIGMA])) or (faded and bgres[i] > fpar[_F_BG_FADED])
         lose = np.zeros(n, np.bool_)
         cond = np.empty((n, rule_status.shape[0]), np.bool_)
         _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, rrms, gap, nh, foreign, imprecise,
@@ -409,8 +416,8 @@ def _build(key):
                         return 12
         for i in range(n):
             # (a wide-search 'ambiguous' cannot occur here: no marker is searched wide)
-            stay = (resid[i] < 0.5 and np.hypot(X[i] - hx[i, 0, 0], Y[i] - hx[i, 0, 1]) < 0.5 and S[i] >= 0.95
-                    and ST[i] <= FLAGGED and fpar[7] > 0 and ST[i] == OK)
+            stay = (resid[i] < STAY_PX and np.hypot(X[i] - hx[i, 0, 0], Y[i] - hx[i, 0, 1]) < STAY_PX
+                    and S[i] >= STAY_SCORE and ST[i] == OK)
             if fits[i] and ST[i] == LOST:
                 X[i] = np.nan
                 Y[i] = np.nan
@@ -422,7 +429,7 @@ def _build(key):
                 return 9  # (after a gap even a marker that stayed: was its blob disputed?)
         for i in range(n):
             if inside[i] and not fits[i]:  # an edge marker (Tracker._judge)
-                if (mass[i] > fpar[0] * mass0[i] and X[i] >= -0.5 and X[i] <= W - 0.5 and Y[i] >= -0.5
+                if (mass[i] > fpar[_F_MIN_MASS] * mass0[i] and X[i] >= -0.5 and X[i] <= W - 0.5 and Y[i] >= -0.5
                         and Y[i] <= H - 0.5):
                     ST[i] = FLAGGED
                     RS[i] = _EDGE
@@ -441,7 +448,8 @@ def _build(key):
         # ---- easy: commit
         held = np.empty(n, np.bool_)  # (Tracker._poor_match, before the running score moves)
         for i in range(n):
-            held[i] = S[i] < fpar[8] and S[i] < score_ref[i] - fpar[9] and sig[i] > fpar[10] * fpar[2]
+            held[i] = (S[i] < fpar[_F_POOR_MATCH] and S[i] < score_ref[i] - fpar[_F_POOR_DROP]
+                       and sig[i] > fpar[_F_POOR_MARGIN] * fpar[_F_MAX_SIGMA])
         _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, rrms, last_score, last_ok, mass_ref, score_ref,
                         last_upd, upd_par, upd)
         for i in range(n):
@@ -472,8 +480,8 @@ def _build(key):
         """One steady frame of :meth:`Tracker.step` (see the module docstring).
 
         ``fpar``: min_mass_ratio, min_score, max_sigma, _FADED, _WEAK, _BG_RESIDUAL_FADED,
-        _CONSTELLATION, _STAY (1.0/0.0), _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX,
-        _MOVING_PX. Returns 0 when the frame was handled (state committed, row ``t`` of
+        _CONSTELLATION, _POOR_MATCH, _POOR_DROP, _POOR_MARGIN, _MEDIAN_RESID_PX, _MOVING_PX (the
+        slots ``_F_*``). Returns 0 when the frame was handled (state committed, row ``t`` of
         ``res_*`` written, ``pos`` the new positions), -1 when it was handled and templates
         are due for an update (``upd``), else the code of :data:`BAIL_REASONS` that sent it
         back, nothing changed. Counts the outcome in ``stats``.
@@ -509,7 +517,7 @@ def _params(tr):
                          p.ambiguity_margin, p.jump_px, _MERGE_VALLEY, _BRIDGE])
     upd_par = np.array([p.update_score, p.refresh_below, p.update_every], np.float64)
     fpar = np.array([p.min_mass_ratio, p.min_score, p.max_sigma, tk._FADED, tk._WEAK, tk._BG_RESIDUAL_FADED,
-                     gl._CONSTELLATION, 1.0 if tk._STAY else 0.0, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN,
+                     gl._CONSTELLATION, tk._POOR_MATCH, tk._POOR_DROP, tk._POOR_MARGIN,
                      gl._MEDIAN_RESID_PX, gl._MOVING_PX])
     return dict(rule_par=rule_par, upd_par=upd_par, fpar=fpar, sample=gl._SAMPLE, p=p)
 

@@ -24,10 +24,10 @@ ASTRAY_FRACTION = 0.4
 #: Fewest neighbours that judge whether a flagged marker is astray.
 ASTRAY_NEIGHBOURS = 2
 #: Fewest neighbours whose affine map, fitted however unlike their moves, may contradict a
-#: resuming marker that no agreeing group vouches for (:meth:`IdentityStage._contradicted`).
+#: resuming marker that no agreeing group vouches for (:meth:`IdentityStage._map_verdict`).
 CONTRADICT_NEIGHBOURS = 3
 #: Largest distance of a resuming marker from its neighbours' line, in units of their
-#: spread across it, for their map to contradict it (:meth:`IdentityStage._contradicted`;
+#: spread across it, for their map to contradict it (:meth:`IdentityStage._map_verdict`;
 #: twice re-acquisition's :data:`~.reacquire._AMPLIFY`: the map only flags, with a
 #: tolerance of ``ASTRAY_FRACTION`` of the spacing, not a pixel).
 CONTRADICT_AMPLIFY = 8.0

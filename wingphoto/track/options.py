@@ -3,8 +3,9 @@
 :class:`TrackOptions` holds every option of :func:`~wingphoto.track.track_markers`. The
 first few are the ones a user tunes (``search_radius``, ``max_sigma``, ``polarity``,
 ``max_coast``, ``fb_tolerance``); the rest are expert thresholds, documented here and
-validated here, whose defaults were set on the synthetic validation scenarios. Module
-constants below them are the tracker's internal constants (not options).
+validated here, whose defaults were set on the synthetic validation scenarios. The few
+module constants below are those the option handling and several stages share; every
+other internal constant (not an option) sits in the stage module that reads it.
 """
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ from dataclasses import dataclass
 
 __all__ = ["TrackOptions"]
 
-#: Disk radius of the centroid (px): at least _RD_MIN, at most _RD_MAX, and
-#: _RD_MARGIN beyond the blob's measured support (blur tails).
+#: Disk radius of the centroid (px): at most _RD_MAX, and _RD_MARGIN beyond the blob's
+#: measured support (blur tails); the inner disk (:func:`~.refine._inner_disk`) is not
+#: shrunk below _RD_MIN.
 _RD_MIN, _RD_MAX, _RD_MARGIN = 2.5, 14.0, 3.0
 #: A frame-0 pick whose refinement sees a background ring this far from a plane
 #: (fraction of the marker's contrast) keeps the click (``pick_moved``).
@@ -79,9 +81,10 @@ class TrackOptions:
         Flag ``appearance`` when the correlation falls by more than this below its running
         value. Off (None) by default: glare sweeps make it flag good points.
     search_every : int
-        A marker on the fast path (moving predictably, alone, matched with score >= 0.9)
-        gets the full windowed NCC search only every ``search_every`` frames; in between it
-        is refined at its prediction and verified. 1 searches every marker every frame.
+        A marker on the fast path (moving predictably, alone, matched well on the frame
+        before: :func:`~.predict.start_frame`, ``FAST_RMS`` and ``FAST_SCORE``) gets the
+        full windowed NCC search only every ``search_every`` frames; in between it is
+        refined at its prediction and verified. 1 searches every marker every frame.
     """
 
     search_radius: int = 20
@@ -110,7 +113,7 @@ class TrackOptions:
             object.__setattr__(self, k, v)
 
         if self.search_radius is None:
-            put("search_radius", 20)
+            put("search_radius", type(self).search_radius)
         for k in ("search_radius", "max_coast", "update_every", "reacquire_radius", "search_every"):
             v = getattr(self, k)
             try:

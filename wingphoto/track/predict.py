@@ -15,6 +15,17 @@ __all__ = ["predict_positions", "shift_history", "start_frame", "update_model"]
 #: (:meth:`~.glitch.GlitchStage._still_found`), and does not anchor the wide search's
 #: consensus for moving markers (:meth:`~.identity.IdentityStage._consensus`).
 STILL_SPEED = 0.3
+#: The fast frame takes a marker (``F``) whose motion model's residual RMS is below
+#: FAST_RMS px and whose last score was at least FAST_SCORE (with three points of history,
+#: seen on the frame before, nothing near: see :func:`start_frame`).
+FAST_RMS, FAST_SCORE = 0.35, 0.9
+#: A fast-path marker is verified after its refinement (``Tracker._verify_fast`` and the
+#: fast frame): its NCC at the refined pixel at least FAST_VERIFY_SCORE, its distance from
+#: the prediction below the larger of FAST_VERIFY_PX and 4 residual RMS.
+FAST_VERIFY_SCORE, FAST_VERIFY_PX = 0.85, 1.0
+#: Running values, (weight of the old value, weight of the new one): an ok point's mass and
+#: score references (the status rules' drops), and the motion model's residual RMS (on squares).
+MASS_BLEND, SCORE_BLEND, RMS_BLEND = (0.9, 0.1), (0.7, 0.3), (0.8, 0.2)
 
 
 def model_speed(hist_x, hist_t):
@@ -114,7 +125,7 @@ def shift_history(hx, ht, nh, dt):
     return out
 
 
-def _pre_numpy(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+def _pre_numpy(t, hx, ht, nh, resid_rms, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
                search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded):
     """numpy twin of :func:`_pre_kernel` (same arguments, same in-place outputs)."""
     pred[:] = predict_positions(hx, ht, nh, t)
@@ -135,14 +146,14 @@ def _pre_numpy(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, 
     jn0 = np.maximum(j2[:, 0], 0)
     merged[:] = inside & (d2[:, 0] < rb + rb[jn0] + 1.0)
     crowded[:] = d2[:, 0] < rb + rb[jn0] + 4.0
-    F[:] = (fits & (nh == 3) & (gap == 1) & (sigma < 0.35) & (last_score >= 0.9) & ~crowded
+    F[:] = (fits & (nh == 3) & (gap == 1) & (resid_rms < FAST_RMS) & (last_score >= FAST_SCORE) & ~crowded
             & (stagger != t % every))
     wide[:] = fits & (nh == 1)
     r[:] = np.where(wide, search_radius,
-                    np.clip(np.ceil(2.0 + 3.0 * sigma + (gap - 1)), 2, search_radius)).astype(np.int64)
+                    np.clip(np.ceil(2.0 + 3.0 * resid_rms + (gap - 1)), 2, search_radius)).astype(np.int64)
 
 
-def start_frame(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+def start_frame(t, hx, ht, nh, resid_rms, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
                 search_radius):
     """Predictions and search plan of frame ``t`` (the engine's :func:`_pre_kernel` or
     :func:`_pre_numpy`); returns a dict of pred, gap, steady, inside, fits, r, F, wide,
@@ -154,13 +165,13 @@ def start_frame(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h,
              F=np.empty(n, np.bool_), wide=np.empty(n, np.bool_), j2=np.empty((n, 2), np.int64),
              d2=np.empty((n, 2)), merged=np.empty(n, np.bool_), crowded=np.empty(n, np.bool_))
     fn = _pre_kernel if engine.use_numba() else _pre_numpy
-    fn(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+    fn(t, hx, ht, nh, resid_rms, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
        search_radius, o["pred"], o["gap"], o["steady"], o["inside"], o["fits"], o["r"], o["F"], o["wide"],
        o["j2"], o["d2"], o["merged"], o["crowded"])
     return o
 
 
-def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref,
+def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, resid_rms, last_score, last_ok, mass_ref,
                    score_ref, last_upd, par, upd):
     """numpy twin of :func:`_history_kernel` (same arguments, same in-place outputs)."""
     ri = np.flatnonzero(rel)
@@ -168,7 +179,7 @@ def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sco
         us = ri[nh[ri] >= 2]
         if us.size:
             e = resid[us]
-            sigma[us] = np.sqrt(0.8 * sigma[us] ** 2 + 0.2 * e * e)
+            resid_rms[us] = np.sqrt(RMS_BLEND[0] * resid_rms[us] ** 2 + RMS_BLEND[1] * e * e)
         hx[ri, 2] = hx[ri, 1]
         hx[ri, 1] = hx[ri, 0]
         hx[ri, 0, 0] = X[ri]
@@ -180,25 +191,25 @@ def _history_numpy(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sco
     ok = ST == 0
     last_score[:] = np.where(ok & np.isfinite(S), S, 0.0)
     last_ok[ok] = t
-    mass_ref[ok] = 0.9 * mass_ref[ok] + 0.1 * mass[ok]
-    score_ref[ok] = 0.7 * score_ref[ok] + 0.3 * S[ok]
+    mass_ref[ok] = MASS_BLEND[0] * mass_ref[ok] + MASS_BLEND[1] * mass[ok]
+    score_ref[ok] = SCORE_BLEND[0] * score_ref[ok] + SCORE_BLEND[1] * S[ok]
     upd[:] = ok & (S >= par[0]) & (S < par[1]) & (np.abs(t - last_upd) >= par[2])
 
 
-def update_model(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref, score_ref,
+def update_model(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, resid_rms, last_score, last_ok, mass_ref, score_ref,
                  last_upd, par):
     """Feed the motion model with the points ``rel`` and update the running values of
     the ok points (the engine's :func:`_history_kernel` or :func:`_history_numpy`);
     returns which templates to update."""
     upd = np.empty(X.shape[0], np.bool_)
     fn = _history_kernel if engine.use_numba() else _history_numpy
-    fn(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref, score_ref, last_upd,
+    fn(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, resid_rms, last_score, last_ok, mass_ref, score_ref, last_upd,
        par, upd)
     return upd
 
 
 @jit
-def _pre_kernel(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
+def _pre_kernel(t, hx, ht, nh, resid_rms, lostflag, last_ok, last_score, stagger, h, rb, W, H, max_coast, every,
                 search_radius, pred, gap, steady, inside, fits, r, F, wide, j2, d2, merged, crowded):
     """Compiled start of :meth:`_Tracker.step`: predictions (as :meth:`_Tracker.predict`),
     gaps, newly lost markers, window fits, nearest neighbours of the predictions, merged
@@ -249,9 +260,9 @@ def _pre_kernel(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h,
         lim = rb[i] + rb[max(j, 0)]
         merged[i] = inside[i] and d2[i, 0] < lim + 1.0
         crowded[i] = d2[i, 0] < lim + 4.0
-        F[i] = (fits[i] and nh[i] == 3 and gap[i] == 1 and sigma[i] < 0.35 and last_score[i] >= 0.9
+        F[i] = (fits[i] and nh[i] == 3 and gap[i] == 1 and resid_rms[i] < FAST_RMS and last_score[i] >= FAST_SCORE
                 and not crowded[i] and stagger[i] != t % every)
-        ri = np.ceil(2.0 + 3.0 * sigma[i] + (gap[i] - 1))
+        ri = np.ceil(2.0 + 3.0 * resid_rms[i] + (gap[i] - 1))
         ri = min(max(ri, 2.0), np.float64(search_radius))
         wide[i] = fits[i] and nh[i] == 1
         r[i] = search_radius if wide[i] else int(ri)
@@ -260,7 +271,7 @@ def _pre_kernel(t, hx, ht, nh, sigma, lostflag, last_ok, last_score, stagger, h,
 
 
 @jit
-def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_score, last_ok, mass_ref,
+def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, resid_rms, last_score, last_ok, mass_ref,
                     score_ref, last_upd, par, upd):
     """Compiled end of :meth:`_Tracker.step`: the motion model fed with the points ``rel``
     (history shift, count, residual RMS), the running values of the ok points, and which
@@ -270,7 +281,7 @@ def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sc
         if rel[i]:
             if nh[i] >= 2:
                 e = resid[i]
-                sigma[i] = np.sqrt(0.8 * sigma[i] * sigma[i] + 0.2 * e * e)
+                resid_rms[i] = np.sqrt(RMS_BLEND[0] * resid_rms[i] * resid_rms[i] + RMS_BLEND[1] * e * e)
             hx[i, 2, 0] = hx[i, 1, 0]
             hx[i, 2, 1] = hx[i, 1, 1]
             hx[i, 1, 0] = hx[i, 0, 0]
@@ -285,8 +296,8 @@ def _history_kernel(t, X, Y, S, ST, rel, resid, mass, hx, ht, nh, sigma, last_sc
         upd[i] = False
         if ok:
             last_ok[i] = t
-            mass_ref[i] = 0.9 * mass_ref[i] + 0.1 * mass[i]
-            score_ref[i] = 0.7 * score_ref[i] + 0.3 * S[i]
+            mass_ref[i] = MASS_BLEND[0] * mass_ref[i] + MASS_BLEND[1] * mass[i]
+            score_ref[i] = SCORE_BLEND[0] * score_ref[i] + SCORE_BLEND[1] * S[i]
             upd[i] = S[i] >= par[0] and S[i] < par[1] and abs(t - last_upd[i]) >= par[2]
 
 

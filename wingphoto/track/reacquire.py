@@ -8,6 +8,7 @@ import numpy as np
 
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
 from .match import _GRID, _analyse_maps
+from .predict import STILL_SPEED
 from .refine import _refine
 from .relocate import STILL_PX, _moving, _roamed, _was_moving
 from .status import _R, _SOFT, FLAGGED, OK
@@ -246,7 +247,7 @@ class ReacquireStage:
                 still = np.hypot(cur[:, 0] - ref[okn, 0], cur[:, 1] - ref[okn, 1]) < STILL_PX
                 # (still: slow when last seen and still where it was in the reference frame -
                 # a wing marker lost at stroke reversal is slow too)
-                group = still if v < 0.3 and math.hypot(*(Pi - ref[i])) < STILL_PX else ~still
+                group = still if v < STILL_SPEED and math.hypot(*(Pi - ref[i])) < STILL_PX else ~still
                 # (a moving marker is not mapped by static dots, nor a static one by the wing)
                 use = group
             cidx = np.flatnonzero(use)

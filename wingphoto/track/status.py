@@ -50,10 +50,15 @@ COAST_PX = 2.0
 #: the two) sit on one blob: neither is ok (``Tracker._coincident``; the fast frame hands
 #: such a frame to it).
 COINCIDENT = 1.0
+#: A marker found within STAY_PX of its prediction and of its last reliable position, with
+#: a score of at least STAY_SCORE, stayed on its own blob: its identity is not in doubt
+#: (``Tracker._judge`` and the fast frame).
+STAY_PX, STAY_SCORE = 0.5, 0.95
 
 #: The status rules, in order (the last that applies wins): (reason, status, condition).
 RULES = (
-    ("imprecise", FLAGGED, "sigma > max_sigma (a precision flag: any identity rule below overrides it)"),
+    ("imprecise", FLAGGED, "sigma > max_sigma, or a faded blob on a rough background (a precision flag: any "
+                           "identity rule below overrides it)"),
     ("low_score", FLAGGED, "score < min_score"),
     ("no_signal", FLAGGED, "mass < min_mass_ratio * frame-0 mass"),
     ("merged", FLAGGED, "mass > max_mass_ratio * running mass (off by default)"),
@@ -74,7 +79,7 @@ _IS_SOFT = np.isin(np.arange(len(REASONS)), _SOFT)
 
 
 @jit
-def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, imprecise,
+def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, resid_rms, gap, nh, foreign, imprecise,
                        XP, YP, prx, pry, inside, j2, rb, valley, lose, par, cond):
     """Compiled condition matrix ``cond`` (n, N_RULES) of :data:`RULES` (rows of markers
     whose window fits; the others stay False). ``par``: min_score, lost_score,
@@ -94,7 +99,7 @@ def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, si
         cond[i, 3] = np.isfinite(par[3]) and ms > par[3] * mass_ref[i]
         cond[i, 4] = np.isfinite(par[4]) and sc < score_ref[i] - par[4]
         cond[i, 5] = SEC[i] >= sc - par[5]
-        lim = max(par[6], 4.0 * sigma[i] + COAST_PX * (gap[i] - 1))
+        lim = max(par[6], 4.0 * resid_rms[i] + COAST_PX * (gap[i] - 1))
         cond[i, 6] = nh[i] >= 3 and resid[i] > lim
         cond[i, 7] = foreign[i]
         # blobs touching a neighbour's (matched, or predicted if tracked last frame)
@@ -115,11 +120,11 @@ def _conditions_kernel(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, si
         cond[i, 10] = ((sc < par[1]) or not (ms > 0)) and not lose[i]
 
 
-def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, sigma, gap, nh, foreign, imprecise,
+def _conditions_numpy(fits, S, SEC, mass, mass0, mass_ref, score_ref, resid, resid_rms, gap, nh, foreign, imprecise,
                       XP, YP, prx, pry, inside, j2, rb, valley, lose, par, cond):
     """numpy twin of :func:`_conditions_kernel` (same arguments, same output)."""
     with np.errstate(invalid="ignore"):
-        lim = np.maximum(par[6], 4.0 * sigma + COAST_PX * (gap - 1))
+        lim = np.maximum(par[6], 4.0 * resid_rms + COAST_PX * (gap - 1))
         px = np.where(np.isfinite(XP), XP, np.where(inside & (gap == 1), prx, np.nan))
         py = np.where(np.isfinite(YP), YP, np.where(inside & (gap == 1), pry, np.nan))
         j = np.maximum(j2, 0)
@@ -157,8 +162,8 @@ def apply_rules(cond, ST, RS):
     ----------
     cond : (n, N_RULES) ndarray of bool
     ST, RS : (n,) ndarray of int8
-        Status and reason codes, changed in place where a rule applies; where none does,
-        ``ST`` is set to ok (for the rows ``rows``).
+        Status and reason codes, changed in place where a rule applies; left as they are
+        where none does (the caller sets the matched points ok first).
     """
     any_ = cond.any(1)
     last = N_RULES - 1 - np.argmax(cond[:, ::-1], axis=1)

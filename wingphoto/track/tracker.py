@@ -13,7 +13,7 @@ from .geometry import _nearest_two
 from .glitch import GlitchStage
 from .identity import IdentityStage
 from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
-from .predict import start_frame, update_model
+from .predict import FAST_VERIFY_PX, FAST_VERIFY_SCORE, start_frame, update_model
 from .reacquire import ReacquireStage
 from .relocate import relocate_group
 from .refine import (
@@ -26,7 +26,8 @@ from .refine import (
     split_neighbour,
 )
 from .sigma import sigma_of
-from .status import _IS_SOFT, _R, COINCIDENT, FLAGGED, LOST, OK, RULES, apply_rules, rule_conditions
+from .status import (_IS_SOFT, _R, COINCIDENT, FLAGGED, LOST, OK, RULES, STAY_PX, STAY_SCORE, apply_rules,
+                     rule_conditions)
 from .templates import TemplateStage
 
 logger = logging.getLogger("wingphoto.track")
@@ -41,7 +42,6 @@ _FADED, _WEAK, _BG_RESIDUAL_FADED = 0.6, 0.75, 0.04
 #: see (independent renderer, DEV seeds 3-52: all 9 ok points more than 1 px off had a score
 #: of 0.78-0.84 and sigma 0.21-0.25)
 _POOR_MATCH, _POOR_DROP, _POOR_MARGIN = 0.85, 0.03, 0.8
-_STAY = True
 #: An ok point this far (fraction of its spacing) from its prediction is checked against its
 #: neighbours' motion even when it was ok on the frame before: the motion model alone does
 #: not vouch for so large a step (a prediction from a re-acquisition's made-up velocity, or
@@ -573,7 +573,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         S[fidx] = self._score_at(frame, fidx, np.rint(X[fidx]), np.rint(Y[fidx]))
         XP[fidx], YP[fidx] = np.rint(X[fidx]), np.rint(Y[fidx])
         resf = np.hypot(X[fidx] - prx[fidx], Y[fidx] - pry[fidx])
-        bad = ~((S[fidx] >= 0.85) & (resf < np.maximum(1.0, 4.0 * self.resid_rms[fidx]))
+        bad = ~((S[fidx] >= FAST_VERIFY_SCORE) & (resf < np.maximum(FAST_VERIFY_PX, 4.0 * self.resid_rms[fidx]))
                 & (mass[fidx] > self.p.min_mass_ratio * self.mass0[fidx]))
         if not bad.any():
             return
@@ -622,8 +622,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             # look-alike far away in a wide search window (no velocity yet), and it needs no
             # neighbours to vouch for it (a static dot next to the moving wing)
             with np.errstate(invalid="ignore"):
-                stay = ((ctx.resid < 0.5) & (np.hypot(X - self.hist_x[:, 0, 0], Y - self.hist_x[:, 0, 1]) < 0.5)
-                        & (S >= 0.95) & (ST <= FLAGGED) & _STAY)
+                stay = ((ctx.resid < STAY_PX) & (np.hypot(X - self.hist_x[:, 0, 0], Y - self.hist_x[:, 0, 1]) < STAY_PX)
+                        & (S >= STAY_SCORE) & (ST <= FLAGGED))
             amb = stay & (RS == _R["ambiguous"]) & ctx.wide & (cond.sum(1) == 1)
             ST[amb] = OK
             RS[amb] = 0
@@ -821,21 +821,10 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             self._set_template(i)
             self.last_upd[i] = t
 
-    def _neighbours(self, x, y, valid):
-        """Two nearest valid other markers (indices, -1 none) and distances (inf none)."""
-        n = len(x)
-        if n < 2:
-            return np.full((n, 2), -1), np.full((n, 2), np.inf)
-        j, d, _ = _nearest_two(x, y, valid)
-        if j.shape[1] < 2:
-            j = np.column_stack([j, np.full(n, -1)])
-            d = np.column_stack([d, np.full(n, np.inf)])
-        return j, d
-
 
     def _sigma(self, ctx):
         """Per-axis 1-sigma uncertainty (px) of each refined position, from the image
-        (:func:`~.sigma.sigma_numpy`; the terms and their gains are described there)."""
+        (:func:`~.sigma.sigma_of`; the terms and their gains are described in :mod:`~.sigma`)."""
         return sigma_of(self.noise, ctx.info, ctx.S, self.rb)
 
     def _rmax(self):
@@ -843,9 +832,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         return np.minimum(self.rb + _RD_MARGIN + 3.0, _RD_MAX)
 
     def _refine_all(self, frame, idx, ctx):
-        """:meth:`_voronoi` and :meth:`_refine_at` of markers ``idx`` by the compiled
-        kernel (``ctx.X, ctx.Y, ctx.mass, ctx.info``); returns the neighbour positions used
-        for the split."""
+        """The compiled twin of :meth:`_voronoi` and :meth:`_refine_at` for markers ``idx``
+        (one kernel call, ``_refine_all_kernel``; writes ``ctx.X, ctx.Y, ctx.mass,
+        ctx.info``); returns the neighbour positions used for the split."""
         XP, YP, X, Y, mass, info = ctx.XP, ctx.YP, ctx.X, ctx.Y, ctx.mass, ctx.info
         jn = self._split_against(ctx)
         n = len(XP)
