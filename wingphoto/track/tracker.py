@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from . import engine
 from .fastpath import fast_step
@@ -188,6 +189,87 @@ class FrameContext:
         return (np.asarray(disp, float) - shift) / (1 + max(self.aged, 0))
 
 
+def _check_picks(xy, half, shape, ids):
+    """Raise ValueError naming the first pick outside the image, or whose template
+    (``half``, px) is larger than the image."""
+    H, W = shape
+    out = (xy[:, 0] < -0.5) | (xy[:, 0] > W - 0.5) | (xy[:, 1] < -0.5) | (xy[:, 1] > H - 0.5)
+    if out.any():
+        i = int(np.flatnonzero(out)[0])
+        raise ValueError(
+            f"pick of point {ids[i]} at ({xy[i, 0]:g}, {xy[i, 1]:g}) is outside the {W}x{H} image; "
+            "picks are (x, y) pixels with (0, 0) the centre of the top-left pixel"
+        )
+    big = (2 * half + 1 > min(H, W)) & (half > 0)
+    if big.any():
+        i = int(np.flatnonzero(big)[0])
+        raise ValueError(
+            f"template of point {ids[i]} ({2 * half[i] + 1} px, half_size {half[i]}) is larger than "
+            f"the {W}x{H} image; give a smaller half_size (or rect)"
+        )
+
+
+def _measure_pick(f, xy, half, polarity, point_id):
+    """Measure the marker under one pick on the picks' frame ``f`` (float32).
+
+    Returns (sign, blob radius px, noise grey levels, shape centre x, y): the polarity
+    (``polarity``, or by the 3x3 core against the background for ``"auto"``); the noise,
+    a robust spread of the patch's horizontal differences; the blob above half its contrast
+    (not half a specular highlight's peak) around the brightest pixel near the pick, its
+    radius (at most ``half`` when given) and its weighted centre. Raises ValueError when no
+    blob stands out of the background at the pick (``point_id`` names it).
+    """
+    H, W = f.shape
+    g = half + 4 if half > 0 else 12
+    ix, iy = int(round(xy[0])), int(round(xy[1]))
+    x0, x1 = max(ix - g, 0), min(ix + g + 1, W)
+    y0, y1 = max(iy - g, 0), min(iy + g + 1, H)
+    patch = f[y0:y1, x0:x1]
+    # background: a plane fitted to the patch's 2 px border (glare is a gradient)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    bmask = np.zeros(patch.shape, bool)
+    bmask[:2], bmask[-2:], bmask[:, :2], bmask[:, -2:] = True, True, True, True
+    A = np.column_stack([np.ones(bmask.sum()), xx[bmask] - ix, yy[bmask] - iy])
+    coef = np.linalg.lstsq(A, patch[bmask].astype(np.float64), rcond=None)[0]
+    plane = coef[0] + coef[1] * (xx - ix) + coef[2] * (yy - iy)
+    bg = float(coef[0])
+    dif = np.diff(patch, axis=1).ravel()
+    noise = 1.4826 * float(np.median(np.abs(dif - np.median(dif)))) / math.sqrt(2) + 1e-6 * (abs(bg) + 1)
+    lx, ly = ix - x0, iy - y0
+    core = patch[max(ly - 1, 0): ly + 2, max(lx - 1, 0): lx + 2]
+    if polarity == "auto":
+        s = 1.0 if core.mean() >= bg else -1.0
+    else:
+        s = float(polarity)
+    sig = s * (patch - plane)
+    near = sig[max(ly - 2, 0): ly + 3, max(lx - 2, 0): lx + 3]
+    peak = float(near.max())
+    # a faint dot's brightest pixel may sit within 4 noise of the plane while the dot
+    # as a whole stands far out of it: also test the best 3x3 mean (its noise is a third)
+    box = ndimage.uniform_filter(sig, 3, mode="nearest")[max(ly - 2, 0): ly + 3, max(lx - 2, 0): lx + 3]
+    stands_out = peak > 4.0 * noise or float(box.max()) > 4.0 * noise / 3.0
+    if not (stands_out and peak > 1e-3 * (abs(bg) + 1)):
+        raise ValueError(
+            f"pick of point {point_id} at ({xy[0]:g}, {xy[1]:g}) is not on a marker: no blob "
+            f"stands out of the background there (contrast {peak:.3g}, noise {noise:.3g}); "
+            "click the marker centre"
+        )
+    ya, xa = max(ly - 2, 0), max(lx - 2, 0)
+    kk = int(np.argmax(near))
+    py_, px_ = ya + kk // near.shape[1], xa + kk % near.shape[1]
+    # the blob: above half its contrast (not half a specular highlight's peak)
+    con = float(_contrast(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
+                          np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
+    lab, _ = ndimage.label(sig > 0.5 * min(con, peak))
+    comp = lab == lab[py_, px_]
+    area = float(comp.sum())
+    r = math.sqrt(area / math.pi)
+    if half > 0:
+        r = min(r, float(half))
+    w = np.where(comp, sig, 0.0)
+    return s, max(r, 1.0), noise, float((w * xx).sum() / w.sum()), float((w * yy).sum() / w.sum())
+
+
 class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
     """State of one tracking pass; :meth:`step` processes one frame.
 
@@ -275,84 +357,44 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
     # ------------------------------------------------------------ set-up
     @classmethod
     def from_picks(cls, frame, xy, half, p, is_u8, ids):
+        """A tracker started from picks on ``frame``.
+
+        Parameters
+        ----------
+        frame : (H, W) ndarray
+            The picks' frame.
+        xy : (N, 2) ndarray of float
+            The picks (x, y) px, one per marker.
+        half : (N,) ndarray of int
+            Template half size per marker (0: from the blob's size).
+        p : TrackOptions
+        is_u8 : bool
+            The frames are 8-bit.
+        ids : sequence of int
+            The markers' point numbers (for the error messages).
+
+        Each pick is measured (:func:`_measure_pick`: polarity, blob radius, noise, shape
+        centre), refined, and kept as clicked where the refinement was pulled away
+        (``pick_moved``); the templates, the motion model and the reference layout start
+        from there.
+
+        Raises
+        ------
+        ValueError
+            A pick outside the image, not on a marker, or too near the edge for its template.
+        """
         self = cls(p, is_u8, frame.shape)
         H, W = frame.shape
         n = len(xy)
-        out = (xy[:, 0] < -0.5) | (xy[:, 0] > W - 0.5) | (xy[:, 1] < -0.5) | (xy[:, 1] > H - 0.5)
-        if out.any():
-            i = int(np.flatnonzero(out)[0])
-            raise ValueError(
-                f"pick of point {ids[i]} at ({xy[i, 0]:g}, {xy[i, 1]:g}) is outside the {W}x{H} image; "
-                "picks are (x, y) pixels with (0, 0) the centre of the top-left pixel"
-            )
-        big = (2 * half + 1 > min(H, W)) & (half > 0)
-        if big.any():
-            i = int(np.flatnonzero(big)[0])
-            raise ValueError(
-                f"template of point {ids[i]} ({2 * half[i] + 1} px, half_size {half[i]}) is larger than "
-                f"the {W}x{H} image; give a smaller half_size (or rect)"
-            )
+        _check_picks(xy, half, frame.shape, ids)
         f = frame.astype(np.float32)
         sign = np.ones(n, np.float32)
         rb = np.zeros(n)
         nz = np.zeros(n)
         cx = np.zeros(n)
         cy = np.zeros(n)
-        from scipy import ndimage
-
         for i in range(n):
-            g = int(half[i]) + 4 if half[i] > 0 else 12
-            ix, iy = int(round(xy[i, 0])), int(round(xy[i, 1]))
-            x0, x1 = max(ix - g, 0), min(ix + g + 1, W)
-            y0, y1 = max(iy - g, 0), min(iy + g + 1, H)
-            patch = f[y0:y1, x0:x1]
-            # background: a plane fitted to the patch's 2 px border (glare is a gradient)
-            yy, xx = np.mgrid[y0:y1, x0:x1]
-            bmask = np.zeros(patch.shape, bool)
-            bmask[:2], bmask[-2:], bmask[:, :2], bmask[:, -2:] = True, True, True, True
-            A = np.column_stack([np.ones(bmask.sum()), xx[bmask] - ix, yy[bmask] - iy])
-            coef = np.linalg.lstsq(A, patch[bmask].astype(np.float64), rcond=None)[0]
-            plane = coef[0] + coef[1] * (xx - ix) + coef[2] * (yy - iy)
-            bg = float(coef[0])
-            dif = np.diff(patch, axis=1).ravel()
-            noise = 1.4826 * float(np.median(np.abs(dif - np.median(dif)))) / math.sqrt(2) + 1e-6 * (abs(bg) + 1)
-            lx, ly = ix - x0, iy - y0
-            core = patch[max(ly - 1, 0): ly + 2, max(lx - 1, 0): lx + 2]
-            if p.polarity == "auto":
-                s = 1.0 if core.mean() >= bg else -1.0
-            else:
-                s = float(p.polarity)
-            sig = s * (patch - plane)
-            near = sig[max(ly - 2, 0): ly + 3, max(lx - 2, 0): lx + 3]
-            peak = float(near.max())
-            # a faint dot's brightest pixel may sit within 4 noise of the plane while the dot
-            # as a whole stands far out of it: also test the best 3x3 mean (its noise is a third)
-            box = ndimage.uniform_filter(sig, 3, mode="nearest")[max(ly - 2, 0): ly + 3, max(lx - 2, 0): lx + 3]
-            stands_out = peak > 4.0 * noise or float(box.max()) > 4.0 * noise / 3.0
-            if not (stands_out and peak > 1e-3 * (abs(bg) + 1)):
-                raise ValueError(
-                    f"pick of point {ids[i]} at ({xy[i, 0]:g}, {xy[i, 1]:g}) is not on a marker: no blob "
-                    f"stands out of the background there (contrast {peak:.3g}, noise {noise:.3g}); "
-                    "click the marker centre"
-                )
-            ya, xa = max(ly - 2, 0), max(lx - 2, 0)
-            kk = int(np.argmax(near))
-            py_, px_ = ya + kk // near.shape[1], xa + kk % near.shape[1]
-            # the blob: above half its contrast (not half a specular highlight's peak)
-            con = float(_contrast(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
-                                  np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
-            lab, _ = ndimage.label(sig > 0.5 * min(con, peak))
-            comp = lab == lab[py_, px_]
-            area = float(comp.sum())
-            r = math.sqrt(area / math.pi)
-            if half[i] > 0:
-                r = min(r, float(half[i]))
-            w = np.where(comp, sig, 0.0)
-            cx[i] = float((w * xx).sum() / w.sum())
-            cy[i] = float((w * yy).sum() / w.sum())
-            rb[i] = max(r, 1.0)
-            nz[i] = noise
-            sign[i] = s
+            sign[i], rb[i], nz[i], cx[i], cy[i] = _measure_pick(f, xy[i], int(half[i]), p.polarity, ids[i])
         self.sign = sign
         self.sign64 = sign.astype(np.float64)
         self.rb = rb
