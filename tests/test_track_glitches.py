@@ -182,3 +182,20 @@ def test_edge_on_wing_gives_no_confident_error():
     neighbours' motion flags it (refusing affine maps from nearly collinear neighbours
     made it ok). Measured: 0 confident errors, 69 % of visible point-frames ok."""
     _scenario_check("edge_on", 1, "left", 0.65)
+
+
+def test_a_torn_frame_flags_the_markers_on_copied_rows(seq):
+    # a frame whose lower half is the previous frame's, byte for byte (a torn frame): the
+    # discs there show the previous instant, ~2 px from where they are; none may be ok
+    frames, truth = seq
+    k = 25
+    g = frames.copy()
+    half = g.shape[1] // 2
+    g[k, half:] = g[k - 1, half:]
+    tr = track_markers(g, np.rint(truth[0]), progress=False)
+    err, status = _check(tr, truth)
+    low = truth[k, :, 1] > half + 10
+    assert low.any() and (err[k, low] > 1).all()  # (the copy shows them where they were)
+    assert not (status[k, low] == "ok").any()
+    assert (status[k, ~low] == "ok").all()  # the discs on fresh rows are measured as usual
+    assert (status[k + 2:] == "ok").mean() > 0.95

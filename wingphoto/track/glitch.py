@@ -1,10 +1,12 @@
-"""Glitches of the sequence: blank, repeated and dropped frames, camera bumps.
+"""Glitches of the sequence: blank, repeated, torn and dropped frames, camera bumps.
 
-Two checks of :meth:`~.tracker.Tracker.step`, as methods of the tracker (a mixin, like the
+Three checks of :meth:`~.tracker.Tracker.step`, as methods of the tracker (a mixin, like the
 other stages):
 
 * :meth:`GlitchStage._frame_glitch`, before anything else: a blank (constant, or not
   finite) frame gives lost points; a byte-identical repeat gets the previous frame's rows.
+* :meth:`GlitchStage._flag_copied`, after the constellation check below: the moving markers on rows
+  copied byte for byte from the frame before (a torn frame) are flagged.
 * the constellation check, after a frame's solve: when most markers - or most of the
   moving ones - left their predictions together (:meth:`GlitchStage._broken`), a glitch
   is looked for (:meth:`GlitchStage._recover`): frames dropped, a frame repeated with new
@@ -223,6 +225,35 @@ class GlitchStage:
             logger.info("frame %d: markers %s, too few for a constellation, fit another blob after dropped frames: "
                         "flagged", t, doubt.nonzero()[0].tolist())
         return ctx
+
+    def _flag_copied(self, frame, ctx, t):
+        """Flag (``ctx.unexplained``) the moving markers (:meth:`_moving_now`) any row of
+        whose disk, not constant, is byte-identical to the frame before: pixels copied
+        from that frame (a marker that moved changes every row it covers).
+
+        A frame that repeats the one before byte for byte is handled by
+        :meth:`_frame_glitch`; one that repeats it only in part - a torn frame, whose rows
+        from some point on are the previous frame's - shows the markers there an instant
+        late, and those across the tear as two half blobs. Taken for a frame "repeated with
+        new noise" (:meth:`_recover`), or as found (a tear below most markers), they were
+        ok 1-7 px from where they were (the independent renderer's ``hard``, the lower half
+        of one frame copied from the frame before: 2-17 ok points per sequence). A frame
+        repeated with new noise is not on the same bytes."""
+        prev = self._prev
+        if prev is None or prev.shape != frame.shape:
+            return
+        copied = []
+        cand = self._moving_now() & ctx.fits & np.isfinite(ctx.XP) & np.isfinite(ctx.YP)
+        for i in cand.nonzero()[0].tolist():
+            r = int(math.ceil(self.rd[i]))
+            x, y = int(round(ctx.XP[i])), int(round(ctx.YP[i]))
+            y0, y1, x0, x1 = max(y - r, 0), min(y + r + 1, self.H), max(x - r, 0), min(x + r + 1, self.W)
+            a, b = frame[y0:y1, x0:x1], prev[y0:y1, x0:x1]
+            if a.size and ((a == b).all(1) & (a.max(1) > a.min(1))).any():
+                copied.append(i)
+        if copied:
+            ctx.unexplained[copied] = True
+            logger.info("frame %d: markers %s on rows copied from the frame before (a torn frame): flagged", t, copied)
 
     def _stalled(self, ctx):
         """True when most of the fast markers (moving >= ``_STALL_SPEED`` px a frame, at

@@ -521,6 +521,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
                 ctx = self._recover(frame, t, direction, ctx)
             elif self._few_to_check(ctx):
                 ctx = self._few_in_doubt(frame, t, direction, ctx)
+            self._flag_copied(frame, ctx, t)
             self._judge(t, res, ctx)
             self._update(frame, t, res, direction, ctx)
             unexplained = ctx.glitch
