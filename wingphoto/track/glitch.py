@@ -238,9 +238,16 @@ class GlitchStage:
         new noise" (:meth:`_recover`), or as found (a tear below most markers), they were
         ok 1-7 px from where they were (the independent renderer's ``hard``, the lower half
         of one frame copied from the frame before: 2-17 ok points per sequence). A frame
-        repeated with new noise is not on the same bytes."""
+        repeated with new noise is not on the same bytes. A copied band narrower than
+        ``_SAMPLE`` rows is not looked for (the check runs on every frame the fast frame
+        hands over, so it first compares every ``_SAMPLE``-th row)."""
         prev = self._prev
         if prev is None or prev.shape != frame.shape:
+            return
+        # (cheap first: a copied band of _SAMPLE rows or more holds one of every
+        # _SAMPLE-th row, identical and not constant)
+        a, b = frame[::_SAMPLE], prev[::_SAMPLE]
+        if not ((a == b).all(1) & (a.max(1) > a.min(1))).any():
             return
         copied = []
         cand = self._moving_now() & ctx.fits & np.isfinite(ctx.XP) & np.isfinite(ctx.YP)
