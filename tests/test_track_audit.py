@@ -107,7 +107,7 @@ def test_a_marker_picked_on_a_later_frame_is_audited_against_that_frame():
 def test_retracked_rows_are_audited_against_the_corrected_frame():
     import pandas as pd
 
-    from wingphoto.track.driver import _audit_retracked
+    from wingphoto.track.retrack import _audit_retracked
 
     res, ref = _grid_run(slip=(5, 20))
     T, N = res.x.shape

@@ -5,7 +5,7 @@ returns the tidy tracks DataFrame of ``docs/conventions.md``; every point-frame 
 ``flagged`` (a best guess, with a ``reason``) or ``lost``. The design - each choice and
 the failure it prevents - is described in ``docs/tracker.md``.
 
-One stage per module (``docs/tracker.md``, *Code map*, says more of each):
+One stage per module (``docs/tracker.md``, *Code map*, says more of each; 25 modules):
 
 ========================  ==============================================================
 ``options``               :class:`TrackOptions`: the user's options, their defaults and validation
@@ -28,7 +28,8 @@ One stage per module (``docs/tracker.md``, *Code map*, says more of each):
 ``fastpath``              a steady frame's whole ``step`` in one compiled call
 ``checkpoint``            save/resume a run
 ``results``               the per-pass result arrays and the tracks table
-``driver``                :func:`track_markers`, :func:`retrack_from`
+``driver``                :func:`track_markers`: the passes over a sequence
+``retrack``               :func:`retrack_from`: re-tracking from a corrected frame
 ``stereo``                :func:`check_stereo`
 ``engine``                the numba/numpy switch (:func:`try_numba`)
 ========================  ==============================================================
@@ -40,7 +41,8 @@ from __future__ import annotations
 
 from ..corrections import apply_corrections, load_corrections, save_corrections
 from ..video import write_tracking_video
-from .driver import retrack_from, track_markers
+from .driver import track_markers
+from .retrack import retrack_from
 from .engine import try_numba
 from .match import match_windows
 from .options import TrackOptions
