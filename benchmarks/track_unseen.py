@@ -19,9 +19,10 @@ third is chosen by the seed):
 ``vib A,P``           a sinusoidal vibration of amplitude A px, period P frames, from k
 ``shake A``           a random shift of up to A px on every frame from k (not physical)
 ``nup S``             frames upsampled S times (bigger markers), then fresh noise
+``soften S``          every frame blurred by a Gaussian of S px after its noise (correlated noise)
 
 Variants of a real-dot sequence (``--realdots``): ``invert`` (dark dots), ``u16``, ``u12``,
-``float``, ``gain`` (a quarter of the contrast), ``nup S``.
+``float``, ``gain`` (a quarter of the contrast), ``nup S``, ``soften S``.
 
 Run::
 
@@ -86,6 +87,8 @@ def apply_variant(F, T, V, name, arg, rng, k):
                 d = rng.uniform(-a[0], a[0], 2)
             F[t] = _warp(F[t], np.float32([[1, 0, d[0]], [0, 1, d[1]]]))
             T[t] = T[t] + d
+    elif name == "soften":  # every frame blurred after its noise (a colour camera's demosaicing, JPEG)
+        F = np.stack([cv2.GaussianBlur(f, (0, 0), a[0]) for f in F])
     elif name == "nup":
         F = _upsample(F, a[0], rng, 2.0)
         T = (T + 0.5) * a[0] - 0.5
