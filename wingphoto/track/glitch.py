@@ -5,8 +5,6 @@ other stages):
 
 * :meth:`GlitchStage._frame_glitch`, before anything else: a blank (constant, or not
   finite) frame gives lost points; a byte-identical repeat gets the previous frame's rows.
-* :meth:`GlitchStage._flag_copied`, after the constellation check below: the moving markers on rows
-  copied byte for byte from the frame before (a torn frame) are flagged.
 * the constellation check, after a frame's solve: when most markers - or most of the
   moving ones - left their predictions together (:meth:`GlitchStage._broken`), a glitch
   is looked for (:meth:`GlitchStage._recover`): frames dropped, a frame repeated with new
@@ -14,6 +12,8 @@ other stages):
   detector of global image motion, which the sequence checks use too) and confirmed by
   the still markers. The one that puts most markers where
   predicted is kept; without one the frame's points are flagged ``constellation``.
+* :meth:`GlitchStage._flag_copied`, after the constellation check: the moving markers on
+  rows copied byte for byte from the frame before (a torn frame) are flagged.
 
 ``docs/tracker.md`` (*Glitches*) gives the cases behind each rule.
 """
@@ -79,6 +79,11 @@ def _median_residual(ctx, nh):
         r = ctx.resid[ctx.fits & (nh >= 2)]
     r = r[np.isfinite(r)]
     return float(np.median(r)) if r.size else np.inf
+
+
+def _copied_rows(a, b):
+    """Whether any row of ``a``, not constant, equals the same row of ``b`` byte for byte."""
+    return a.size > 0 and bool(((a == b).all(1) & (a.max(1) > a.min(1))).any())
 
 
 def _drop_count_in_doubt(dt, dropped_good, n):
@@ -246,8 +251,7 @@ class GlitchStage:
             return
         # (cheap first: a copied band of _SAMPLE rows or more holds one of every
         # _SAMPLE-th row, identical and not constant)
-        a, b = frame[::_SAMPLE], prev[::_SAMPLE]
-        if not ((a == b).all(1) & (a.max(1) > a.min(1))).any():
+        if not _copied_rows(frame[::_SAMPLE], prev[::_SAMPLE]):
             return
         copied = []
         cand = self._moving_now() & ctx.fits & np.isfinite(ctx.XP) & np.isfinite(ctx.YP)
@@ -255,8 +259,7 @@ class GlitchStage:
             r = int(math.ceil(self.rd[i]))
             x, y = int(round(ctx.XP[i])), int(round(ctx.YP[i]))
             y0, y1, x0, x1 = max(y - r, 0), min(y + r + 1, self.H), max(x - r, 0), min(x + r + 1, self.W)
-            a, b = frame[y0:y1, x0:x1], prev[y0:y1, x0:x1]
-            if a.size and ((a == b).all(1) & (a.max(1) > a.min(1))).any():
+            if _copied_rows(frame[y0:y1, x0:x1], prev[y0:y1, x0:x1]):
                 copied.append(i)
         if copied:
             ctx.unexplained[copied] = True
