@@ -49,6 +49,14 @@ COASTED_FRAMES = 2
 #: motion model that moves them as anchors when at least this many lie within a marker's
 #: neighbourhood.
 _TRACKED_ANCHORS = 3
+#: A wide match less than half a spacing from where its marker was is contested when at
+#: least this many of the wide-searched neighbours (:meth:`IdentityStage._contested`), and
+#: more than agree with it, moved half a spacing or more differently.
+_CONTESTED_MIN = 2
+#: ... counting only neighbours whose match lies less than this many of their spacings from
+#: where they were: one further may be the next look-alike of a small move (the still
+#: discs of a mount, 20 px apart, whose ambiguous best peaks are their neighbours' discs).
+_CONTESTED_REACH = 0.75
 
 
 class IdentityStage:
@@ -548,6 +556,37 @@ class IdentityStage:
                 others.append(o)
         return _analyse_maps(maps, shp, excl, others)[3]
 
+    def _contested(self, idx, wsel, near, pred, mx, my):
+        """Which wide matches ``near`` (boolean over ``idx``: unambiguous, less than half a
+        spacing from where the marker was) their neighbourhood contests: of the wide-searched
+        markers within ``self.local`` px on the reference frame (their best peaks, ambiguous
+        or not), at least ``_CONTESTED_MIN``, and more than agree with it, moved half its
+        spacing or more differently.
+
+        A regular grid of alike dots moving more than half its spacing on a frame with no
+        velocity yet shows each dot the one behind it nearer than its own: real dots,
+        fresh DEV seed 780 cam1, frame 1, the grid 19.6 px on at a 33 px spacing - a dot
+        matched the dot behind, 14 px back, unambiguous, and the far matches of the
+        neighbours that moved with the grid anchor nothing (the rule below), so the near,
+        aliased ones agreed with it; flagged only ``imprecise``, it fed its motion model
+        and went ok 100.9 px off on frame 3. Contested, it is flagged and not fed."""
+        out = np.zeros(len(idx), bool)
+        ref = self.ref_pos
+        disp = np.column_stack([mx - pred[idx, 0], my - pred[idx, 1]])
+        wk = np.flatnonzero(wsel)
+        for k in np.flatnonzero(near).tolist():
+            i = idx[k]
+            o = wk[wk != k]
+            o = o[np.hypot(ref[idx[o], 0] - ref[i, 0], ref[idx[o], 1] - ref[i, 1]) <= self.local]
+            with np.errstate(invalid="ignore"):
+                apart = np.hypot(disp[o, 0] - disp[k, 0], disp[o, 1] - disp[k, 1]) >= 0.5 * self._spacing[i]
+                # (a neighbour's match most of a spacing away is more likely the next
+                # look-alike than a move that large: no vote against)
+                plausible = np.hypot(disp[o, 0], disp[o, 1]) < _CONTESTED_REACH * self._spacing[idx[o]]
+            n_apart = int((apart & plausible).sum())
+            out[k] = n_apart >= _CONTESTED_MIN and n_apart > int((~apart).sum())
+        return out
+
     def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl, unvouched):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
 
@@ -584,6 +623,7 @@ class IdentityStage:
         # away, unambiguous, and their neighbours followed them one spacing back: ok 31-92
         # px off)
         far = np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) >= 0.5 * self._spacing[idx]
+        unvouched[idx[self._contested(idx, wsel, good & ~far, pred, mx, my)]] = True
         anchor = good & ~far
         ax[idx[anchor]], ay[idx[anchor]] = mx[anchor], my[anchor]
         anchors = np.flatnonzero(np.isfinite(ax))

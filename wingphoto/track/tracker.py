@@ -709,7 +709,8 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             g = (ST == OK) & (True if ctx.glitch else ctx.unexplained)
             ST[g] = FLAGGED
             RS[g] = _R["constellation"]
-        u = (ST == OK) & ctx.unvouched
+        # (an identity flag: it overrides the precision flag, and the point is not fed)
+        u = ((ST == OK) | ((ST == FLAGGED) & (RS == _R["imprecise"]))) & ctx.unvouched
         ST[u] = FLAGGED
         RS[u] = _R["ambiguous"]
         g = (ST == OK) & self._relocated_astray(ctx, res)
