@@ -347,3 +347,18 @@ def test_a_grid_moving_more_than_half_its_spacing_does_not_start_on_the_dot_behi
     a = _glitched_errors("none", "cam1", 780)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
     assert a["ok"].sum() > 450  # (measured 528; 559 before, one of them 100.9 px off)
+
+
+@pytest.mark.parametrize("kind, seed, min_ok", [("dropped", 931, 450), ("bumped", 940, 520)])  # (measured 546, 634)
+def test_a_glitch_left_unexplained_does_not_pass_the_next_frame_on_the_dots_behind(kind, seed, min_ok):
+    # fresh DEV seeds 931 and 940 cam1 (session 27). dropped: three dropped source frames
+    # moved the grid about one 33 px spacing; no hypothesis explained the frame (flagged),
+    # and the next passed as predicted, its median residual 5.1 px but 6 of 10 dots within
+    # their limits - on the dots behind: 335 points ok 33 px off. bumped: a (-5, 2) px bump
+    # nothing explained; on the next frame "3 frames dropped" won with 10 of 17 dots at
+    # 3.8 px: 324 points ok 34 px off. After an unexplained frame the next must be as
+    # predicted by its median too, and a hypothesis must put 3/4 of the dots where
+    # predicted (GlitchStage._recover).
+    a = _glitched_errors(kind, "cam1", seed)
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"].sum() >= min_ok
