@@ -408,7 +408,10 @@ class GlitchStage:
             # off any blob, and "6 frames dropped" won on 4 of the 7 markers it left
             # checkable of 22, putting a dot ok on the next dot of the grid - real dots,
             # DEV seed 53 cam1, source frames 10-13 dropped: 34 px off)
-            if (n >= 3 and good >= _CONSTELLATION * max(n, n0) and good >= share * n
+            # (and at least three markers, a constellation: with three checkable, "3 frames
+            # dropped" won on two after a bump no hypothesis tried, and one dot went ok on
+            # the dot behind - real dots, fresh DEV seed 964 cam1, bumped: 10 points 33 px off)
+            if (good >= 3 and good >= _CONSTELLATION * max(n, n0) and good >= share * n
                     and med <= _HYPOTHESIS_RESID_PX + _DROP_TOL * abs(dt)
                     and (good, -med) > best_key):
                 best, best_key, best_n = (dt, dx, dy, late), (good, -med), max(n, n0)
