@@ -19,6 +19,10 @@ __all__ = ["TrackOptions"]
 #: measured support (blur tails); the inner disk (:func:`~.refine._inner_disk`) is not
 #: shrunk below _RD_MIN.
 _RD_MIN, _RD_MAX, _RD_MARGIN = 2.5, 14.0, 3.0
+#: ... and at least _RD_FACE_MARGIN beyond the radius of its face (the blob above half its
+#: face's median brightness, :func:`~.tracker._measure_pick`), where a highlight is brighter
+#: than the rest.
+_RD_FACE_MARGIN = 1.5
 #: A frame-0 pick whose refinement sees a background ring this far from a plane
 #: (fraction of the marker's contrast) keeps the click (``pick_moved``).
 _BG_RESIDUAL = 0.1

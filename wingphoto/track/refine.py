@@ -183,19 +183,27 @@ SECOND_WIDE = 2
 SECOND_EXPLAINED = 2.0
 
 
-def _contrast(sig, disk, peak, noise):
-    """The contrast of each blob (see :data:`CONTRAST_FACE`): (n,) float32.
+def _face(sig, disk, peak, noise):
+    """The face of each blob (see :data:`CONTRAST_FACE`): the median of its disk values
+    above CONTRAST_FLOOR of the peak and 3 noise sigmas, (n,) float32, NaN where none is.
 
     sig : (n, K) background-subtracted patch values (0 outside the disk), disk (n, K) bool,
     peak (n,) the largest of them, noise (n,) the noise sigma."""
     floor = np.maximum(CONTRAST_FLOOR * peak, 3.0 * np.asarray(noise, np.float32)).astype(np.float32)
     m = disk & (sig > floor[:, None])
-    out = peak.astype(np.float32).copy()
+    out = np.full(len(peak), np.nan, np.float32)
     has = m.any(1)
     if has.any():
-        face = np.nanmedian(np.where(m[has], sig[has], np.nan), axis=1)
-        out[has] = np.minimum(out[has], CONTRAST_FACE * face)
+        out[has] = np.nanmedian(np.where(m[has], sig[has], np.nan), axis=1)
     return out
+
+
+def _contrast(sig, disk, peak, noise):
+    """The contrast of each blob (see :data:`CONTRAST_FACE`): its peak, but at most
+    CONTRAST_FACE times its face (:func:`_face`); (n,) float32. Arguments as for
+    :func:`_face`."""
+    face = _face(sig, disk, peak, noise)
+    return np.where(np.isfinite(face), np.minimum(peak, CONTRAST_FACE * face), peak).astype(np.float32)
 
 
 def _texture(sig, inner, noise):

@@ -13,15 +13,16 @@ from .fastpath import fast_step
 from .geometry import _nearest_two
 from .glitch import GlitchStage
 from .identity import IdentityStage
-from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_MARGIN, _RD_MAX
+from .options import _BG_RESIDUAL, _BRIDGE, _MERGE_VALLEY, _RD_FACE_MARGIN, _RD_MARGIN, _RD_MAX
 from .predict import FAST_VERIFY_PX, FAST_VERIFY_SCORE, start_frame, update_model
 from .reacquire import ReacquireStage
 from .relocate import relocate_group
 from .refine import (
     FOREIGN_FRACTION,
     FOREIGN_NOISE,
+    CONTRAST_FACE,
     WEIGHT_FRACTION,
-    _contrast,
+    _face,
     _refine,
     _refine_all_kernel,
     split_neighbour,
@@ -212,12 +213,14 @@ def _check_picks(xy, half, shape, ids):
 def _measure_pick(f, xy, half, polarity, point_id):
     """Measure the marker under one pick on the picks' frame ``f`` (float32).
 
-    Returns (sign, blob radius px, noise grey levels, shape centre x, y): the polarity
-    (``polarity``, or by the 3x3 core against the background for ``"auto"``); the noise,
-    a robust spread of the patch's horizontal differences; the blob above half its contrast
-    (not half a specular highlight's peak) around the brightest pixel near the pick, its
-    radius (at most ``half`` when given) and its weighted centre. Raises ValueError when no
-    blob stands out of the background at the pick (``point_id`` names it).
+    Returns (sign, blob radius px, noise grey levels, shape centre x, y, face radius px):
+    the polarity (``polarity``, or by the 3x3 core against the background for ``"auto"``);
+    the noise, a robust spread of the patch's horizontal differences; the blob above half
+    its contrast (not half a specular highlight's peak) around the brightest pixel near the
+    pick, its radius (at most ``half`` when given) and its weighted centre; the radius of
+    the blob above half its face (:func:`~.refine._face`, and 3 noise sigmas), NaN where
+    that reaches the patch's border. Raises ValueError when no blob stands out of the
+    background at the pick (``point_id`` names it).
     """
     H, W = f.shape
     g = half + 4 if half > 0 else 12
@@ -258,16 +261,26 @@ def _measure_pick(f, xy, half, polarity, point_id):
     kk = int(np.argmax(near))
     py_, px_ = ya + kk // near.shape[1], xa + kk % near.shape[1]
     # the blob: above half its contrast (not half a specular highlight's peak)
-    con = float(_contrast(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
-                          np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
-    lab, _ = ndimage.label(sig > 0.5 * min(con, peak))
+    face = float(_face(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
+                       np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
+    con = min(CONTRAST_FACE * face, peak) if math.isfinite(face) else peak
+    lab, _ = ndimage.label(sig > 0.5 * con)
     comp = lab == lab[py_, px_]
     area = float(comp.sum())
     r = math.sqrt(area / math.pi)
     if half > 0:
         r = min(r, float(half))
     w = np.where(comp, sig, 0.0)
-    return s, max(r, 1.0), noise, float((w * xx).sum() / w.sum()), float((w * yy).sum() / w.sum())
+    # the face's extent: a bright highlight on a large dim face is the blob above half the
+    # contrast, and a disk sized to it leaves the face out (below)
+    r_face = np.nan
+    if math.isfinite(face):
+        lab, _ = ndimage.label(sig > max(0.5 * face, 3.0 * noise))
+        if lab[py_, px_]:
+            fc = lab == lab[py_, px_]
+            if not (fc & bmask).any():
+                r_face = math.sqrt(float(fc.sum()) / math.pi)
+    return s, max(r, 1.0), noise, float((w * xx).sum() / w.sum()), float((w * yy).sum() / w.sum()), r_face
 
 
 class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
@@ -393,13 +406,22 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         nz = np.zeros(n)
         cx = np.zeros(n)
         cy = np.zeros(n)
+        rf = np.zeros(n)
         for i in range(n):
-            sign[i], rb[i], nz[i], cx[i], cy[i] = _measure_pick(f, xy[i], int(half[i]), p.polarity, ids[i])
+            sign[i], rb[i], nz[i], cx[i], cy[i], rf[i] = _measure_pick(f, xy[i], int(half[i]), p.polarity, ids[i])
         self.sign = sign
         self.sign64 = sign.astype(np.float64)
         self.rb = rb
         self.noise = nz
-        self.rd = np.minimum(rb + _RD_MARGIN, _RD_MAX)
+        # the disk: _RD_MARGIN beyond the blob, and _RD_FACE_MARGIN beyond its face where
+        # that is larger (at most the largest disk): a specular highlight on a large dim
+        # dot is the blob above half the contrast, and a disk sized to it left the face
+        # out and put the centre on the highlight (real dots upsampled 1.5-2x, dots 8-14 px
+        # across: ok 1.4-4.0 px off at sigma 0.15-0.24; the face's plane fit in the ring
+        # tilted to fit the face's edge, so nothing spilled)
+        with np.errstate(invalid="ignore"):
+            rd0 = np.fmax(rb + _RD_MARGIN, rf + _RD_FACE_MARGIN)
+        self.rd = np.minimum(rd0, self._rmax())
         nbr = self._nearest_positions(cx, cy, np.ones(n, bool))
         x, y, mass, info = _refine(frame, cx, cy, self.rd, sign, nz, nbr, iterations=3, rmax=self._rmax())
         # a click is within ~0.7 px of a marker's centre: a refinement that moved further
