@@ -634,13 +634,6 @@ class IdentityStage:
             d = np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1])
             cand, d = cand[d <= self.local], d[d <= self.local]
             if cand.size < 2:
-                # nothing to vouch for a far match either (below; real dots, fresh DEV seed
-                # 946 cam1, frame 1: a dot at the view's edge moving 20 px on a 32 px grid
-                # took the dot 18 px the other way, unambiguous, every neighbour's match
-                # ambiguous; fed, it went one spacing further off on every frame, ok 32-128
-                # px off)
-                if good[k] and far[k]:
-                    unvouched[i] = True
                 continue
             if moving[cand].sum() >= _TRACKED_ANCHORS:
                 # moving markers with a motion model predict better than other wide matches,
