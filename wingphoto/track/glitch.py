@@ -57,8 +57,9 @@ _MEDIAN_RESID_PX = 3.0
 #: (A first version, 3 px together with flagging every frame broken by its median, cost
 #: 4.3 % of the real-dot DEV ok points; the two were not measured apart.)
 _HYPOTHESIS_RESID_PX = 5.0
-#: After a frame no glitch explained, a hypothesis must put at least this share of the
-#: markers where predicted to win (:meth:`GlitchStage._recover`), not only most of them.
+#: After a frame no glitch explained, an explanation of the next - a glitch hypothesis or
+#: the motion model itself - must put at least this share of the markers it can check
+#: where predicted (:meth:`GlitchStage._recover`), not only most of them.
 _AFTER_UNEXPLAINED = 2.0 / 3.0
 #: A frame on which most markers moving at least this fast (px/frame) are back where they
 #: were is a repeat (:meth:`_stalled`).

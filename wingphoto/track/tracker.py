@@ -20,8 +20,8 @@ from .relocate import relocate_group
 from .refine import (
     FOREIGN_FRACTION,
     FOREIGN_NOISE,
-    CONTRAST_FACE,
     WEIGHT_FRACTION,
+    _contrast,
     _face,
     _refine,
     _refine_all_kernel,
@@ -261,10 +261,10 @@ def _measure_pick(f, xy, half, polarity, point_id):
     kk = int(np.argmax(near))
     py_, px_ = ya + kk // near.shape[1], xa + kk % near.shape[1]
     # the blob: above half its contrast (not half a specular highlight's peak)
-    face = float(_face(sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
-                       np.array([sig[~bmask].max()], np.float32), np.array([noise]))[0])
-    con = min(CONTRAST_FACE * face, peak) if math.isfinite(face) else peak
-    lab, _ = ndimage.label(sig > 0.5 * con)
+    blob = (sig.reshape(1, -1).astype(np.float32), ~bmask.reshape(1, -1),
+            np.array([sig[~bmask].max()], np.float32), np.array([noise]))
+    con = float(_contrast(*blob)[0])
+    lab, _ = ndimage.label(sig > 0.5 * min(con, peak))
     comp = lab == lab[py_, px_]
     area = float(comp.sum())
     r = math.sqrt(area / math.pi)
@@ -274,6 +274,7 @@ def _measure_pick(f, xy, half, polarity, point_id):
     # the face's extent: a bright highlight on a large dim face is the blob above half the
     # contrast, and a disk sized to it leaves the face out (below)
     r_face = np.nan
+    face = float(_face(*blob)[0])
     if math.isfinite(face):
         lab, _ = ndimage.label(sig > max(0.5 * face, 3.0 * noise))
         if lab[py_, px_]:
