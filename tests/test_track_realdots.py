@@ -357,8 +357,8 @@ def test_a_glitch_left_unexplained_does_not_pass_the_next_frame_on_the_dots_behi
     # their limits - on the dots behind: 335 points ok 33 px off. bumped: a (-5, 2) px bump
     # nothing explained; on the next frame "3 frames dropped" won with 10 of 17 dots at
     # 3.8 px: 324 points ok 34 px off. After an unexplained frame the next must be as
-    # predicted by its median too, and a hypothesis must put 3/4 of the dots where
-    # predicted (GlitchStage._recover).
+    # predicted by its median too, and a hypothesis must put two thirds of the dots
+    # where predicted (GlitchStage._recover).
     a = _glitched_errors(kind, "cam1", seed)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
     assert a["ok"].sum() >= min_ok
@@ -371,3 +371,29 @@ def test_a_glitch_hypothesis_needs_three_markers_where_predicted():
     a = _glitched_errors("bumped", "cam1", 964)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
     assert a["ok"].sum() > 120  # (measured 147)
+
+
+@pytest.mark.parametrize("seed, min_ok", [(946, 0), (1011, 0)])
+def test_a_dot_at_the_view_edge_does_not_start_on_the_dot_behind(seed, min_ok):
+    # fresh DEV seeds 946 and 1011 cam1 (session 27). 946: a dot 8 px from the left edge,
+    # the grid moving 20 px on frame 1 at a 32 px spacing, took the dot behind it 18 px
+    # away (0.93 against 0.36: its own blob lay where the template does not fit); its
+    # neighbours were all ambiguous, no anchor to check it, and it was ok one spacing
+    # further off on every frame, 32-128 px. 1011: a dot 6 px from the top edge, leaving
+    # the view, the same, ok 28 and 55 px off. Such a match is provisional
+    # (IdentityStage._beyond_view): flagged, but it feeds the motion model, and the
+    # marker resumes ok only where its neighbours vouch for its path.
+    a = _glitched_errors("none", "cam1", seed)
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"].sum() > min_ok
+
+
+def test_a_grid_left_ambiguous_does_not_resume_on_the_dots_behind():
+    # fresh DEV seed 1011 cam1 with two black frames (session 27): frame 1 left the whole
+    # grid ambiguous, unfed; on frame 2 the grid had moved 24 px at a 28 px spacing, and
+    # the wide search found the dots behind, 4 px from where the dots had been, each
+    # vouching for the others: dot 59 ok 28 px off. Frame 1, the previous image, shows no
+    # dot on a constant-velocity path to them (IdentityStage._off_path).
+    a = _glitched_errors("black", "cam1", 1011)
+    assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
+    assert a["ok"].sum() > 0

@@ -58,6 +58,13 @@ _CONTESTED_MIN = 2
 #: discs of a mount, 20 px apart, whose ambiguous best peaks are their neighbours' discs).
 _CONTESTED_REACH = 0.75
 
+#: :meth:`IdentityStage._off_path`: the previous image must show the marker within this
+#: fraction of its move (at least ``_PATH_MIN_PX``) of the point a constant velocity puts
+#: it at, with at least this share of its match's score.
+_PATH_SLACK = 0.2
+_PATH_MIN_PX = 3
+_PATH_SCORE = 0.5
+
 
 class IdentityStage:
     """Identity checks of :class:`~wingphoto.track.tracker.Tracker`.
@@ -523,7 +530,7 @@ class IdentityStage:
             near = wsel & (np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) < 0.5 * self._spacing[idx])
             second[near] = self._runner_up_by_matches(idx[near], maps[near], shp[near], origin[near], excl[near],
                                                       idx, mx, my, pred, j2)
-            self._consensus(frame, idx, wsel, pred, mx, my, score, second, excl, ctx.unvouched)
+            self._consensus(frame, idx, wsel, mx, my, score, second, excl, ctx)
         XP[idx] = mx
         YP[idx] = my
         S[idx] = score
@@ -587,7 +594,60 @@ class IdentityStage:
             out[k] = n_apart >= _CONTESTED_MIN and n_apart > int((~apart).sum())
         return out
 
-    def _consensus(self, frame, idx, wsel, pred, mx, my, score, second, excl, unvouched):
+    def _off_path(self, idx, sel, pred, mx, my, score, ctx):
+        """Which wide matches ``sel`` (boolean over ``idx``) of markers last fed two or more
+        frames ago the previous image does not show on the way to (boolean over ``idx``).
+
+        A wide search starts from where the marker was last fed, ``ctx.gap`` frames ago;
+        moving at a constant velocity to its match, it passed, on the previous image,
+        ``(gap - 1) / gap`` of the way there. Where the template matches nothing within
+        ``_PATH_SLACK`` of the move (at least ``_PATH_MIN_PX``) of that point - best
+        score below ``_PATH_SCORE`` of the match's - the match is no path the marker
+        followed: on a regular grid of alike dots that moved more than half its spacing
+        since, it is the dot behind (real dots, fresh seed 1011 cam1, black: frame 1 left
+        a whole grid ambiguous, unfed; on frame 2 it had moved 24 px at a 28 px spacing,
+        and the dots behind, 4 px from where the dots had been, vouched for each other:
+        ok 28 px off). Not judged after dropped or repeated frames (``ctx.aged``: the
+        previous image is not one frame back) nor without a previous image or after a
+        blank one."""
+        out = np.zeros(len(idx), bool)
+        prev = self._prev
+        k = np.flatnonzero(sel & (ctx.gap[idx] >= 2))
+        if not k.size or ctx.aged != 0 or prev is None or prev.shape != (self.H, self.W) or not prev.max() > prev.min():
+            return out  # (a blank previous image shows nothing)
+        i = idx[k]
+        g = ctx.gap[i].astype(np.float64)
+        d = np.column_stack([mx[k] - pred[i, 0], my[k] - pred[i, 1]])
+        via = pred[i] + d * ((g - 1) / g)[:, None]
+        rr = np.maximum(_PATH_MIN_PX, np.ceil(_PATH_SLACK * np.hypot(d[:, 0], d[:, 1]))).astype(np.int64)
+        ci = np.rint(via).astype(np.int64)
+        inside = ((ci[:, 0] - self.h[i] >= 0) & (ci[:, 1] - self.h[i] >= 0)
+                  & (ci[:, 0] + self.h[i] <= self.W - 1) & (ci[:, 1] + self.h[i] <= self.H - 1))
+        k, i, ci, rr = k[inside], i[inside], ci[inside], rr[inside]
+        if not k.size:
+            return out
+        maps, _, _ = self._match(prev, i, ci, rr)
+        best = maps.reshape(len(k), -1).max(axis=1)
+        out[k] = best < _PATH_SCORE * score[k]
+        return out
+
+    def _beyond_view(self, i, at, reach):
+        """Whether marker ``i``'s template cannot be centred everywhere within ``reach`` px
+        of ``at`` (the image's edge is less than its half-size ``h`` further).
+
+        A wide search (no velocity yet) sees only where the whole template fits. A marker
+        near the edge of the view whose own blob moved towards it, or out of it, is not
+        seen there, and its best match is the next look-alike the other way: a far match
+        that no anchor can check, unambiguous, since its own blob left no rival peak. Real
+        dots, fresh seed 946 cam1, frame 1: a dot 8 px from the left edge moving 20 px on a
+        32 px grid took the dot behind it 18 px away (score 0.93 against 0.36), all its
+        neighbours ambiguous, and was ok one spacing further off on every frame (32-128
+        px); fresh seed 1011 cam1: a dot 6 px from the top edge, leaving the view, took the
+        dot behind it, ok 28 and 55 px off."""
+        h = self.h[i]
+        return bool(min(at[0] - h, self.W - 1 - h - at[0], at[1] - h, self.H - 1 - h - at[1]) < reach)
+
+    def _consensus(self, frame, idx, wsel, mx, my, score, second, excl, ctx):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
 
         Each wide-searched marker's displacement from the reference frame is predicted from
@@ -606,6 +666,7 @@ class IdentityStage:
         neighbour's or an unpicked marker's blob when its own is dim or the two look alike.
         """
         p = self.p
+        pred, unvouched, provisional = ctx.pred, ctx.unvouched, ctx.provisional
         n = len(self.h)
         ref = self.ref_pos
         ax = np.full(n, np.nan)
@@ -624,7 +685,9 @@ class IdentityStage:
         # px off)
         far = np.hypot(mx - pred[idx, 0], my - pred[idx, 1]) >= 0.5 * self._spacing[idx]
         unvouched[idx[self._contested(idx, wsel, good & ~far, pred, mx, my)]] = True
-        anchor = good & ~far
+        off = self._off_path(idx, good, pred, mx, my, score, ctx)
+        unvouched[idx[off]] = True
+        anchor = good & ~far & ~off
         ax[idx[anchor]], ay[idx[anchor]] = mx[anchor], my[anchor]
         anchors = np.flatnonzero(np.isfinite(ax))
         redo, qs = [], []
@@ -634,6 +697,10 @@ class IdentityStage:
             d = np.hypot(ref[cand, 0] - ref[i, 0], ref[cand, 1] - ref[i, 1])
             cand, d = cand[d <= self.local], d[d <= self.local]
             if cand.size < 2:
+                # nothing to check it against: a far match stands, unless the marker's own
+                # blob may have gone where no template fits (:meth:`_beyond_view`)
+                if good[k] and far[k] and self._beyond_view(i, pred[i], math.hypot(mx[k] - pred[i, 0], my[k] - pred[i, 1])):
+                    provisional[i] = True
                 continue
             if moving[cand].sum() >= _TRACKED_ANCHORS:
                 # moving markers with a motion model predict better than other wide matches,

@@ -137,6 +137,12 @@ class FrameContext:
         from where they were, whose neighbours did not move together: nothing vouches for
         the match (:meth:`~.identity.IdentityStage._consensus`); their points are flagged
         ``ambiguous``.
+    provisional : (N,) ndarray of bool
+        Wide-searched markers matched far from where they were, with nothing to check
+        the match against, whose own blob may have gone where no template fits
+        (:meth:`~.identity.IdentityStage._beyond_view`): their points are flagged
+        ``ambiguous`` but feed the motion model, so that the marker resumes ok only where
+        the neighbours vouch for its path (a marker resuming after a gap).
     shift : (2,) ndarray of float
         The camera's shift (px) measured on this frame (:meth:`Tracker._recover`; zero
         without a bump): the image moved by it besides the markers' own motion.
@@ -180,6 +186,7 @@ class FrameContext:
     glitch: bool = False
     unexplained: np.ndarray = None
     unvouched: np.ndarray = None
+    provisional: np.ndarray = None
     shift: np.ndarray = None
     measured: tuple = ()
 
@@ -583,7 +590,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         RS[self.lostflag] = _R["lost_track"]
         return FrameContext(
             **plan, px=np.rint(pred[:, 0]), py=np.rint(pred[:, 1]), aged=aged, shift=np.zeros(2),
-            unexplained=np.zeros(n, bool), unvouched=np.zeros(n, bool),
+            unexplained=np.zeros(n, bool), unvouched=np.zeros(n, bool), provisional=np.zeros(n, bool),
             nbr_r=self.rd[np.maximum(plan["j2"][:, 0], 0)] + 0.5,
             XP=np.full(n, np.nan), YP=np.full(n, np.nan), S=np.full(n, np.nan), SEC=np.full(n, -2.0),
             lose=np.zeros(n, bool), eidx=(plan["inside"] & ~plan["fits"]).nonzero()[0],
@@ -733,7 +740,9 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
             ST[g] = FLAGGED
             RS[g] = _R["constellation"]
         # (an identity flag: it overrides the precision flag, and the point is not fed)
-        u = ((ST == OK) | ((ST == FLAGGED) & (RS == _R["imprecise"]))) & ctx.unvouched
+        passed = (ST == OK) | ((ST == FLAGGED) & (RS == _R["imprecise"]))
+        ctx.provisional &= passed & ~ctx.unvouched  # (fed by :meth:`_update`)
+        u = passed & (ctx.unvouched | ctx.provisional)
         ST[u] = FLAGGED
         RS[u] = _R["ambiguous"]
         g = (ST == OK) & self._relocated_astray(ctx, res)
@@ -804,7 +813,7 @@ class Tracker(TemplateStage, IdentityStage, ReacquireStage, GlitchStage):
         # an imprecise point passed every identity rule (they override it): only its
         # position is uncertain, and the motion model, which weighs it by its residual,
         # follows it - a whole sheet of faint dots would otherwise coast until lost
-        rel = (ST == OK) | ((ST == FLAGGED) & ((RS == _R["edge"]) | (RS == _R["imprecise"])))
+        rel = (ST == OK) | ((ST == FLAGGED) & ((RS == _R["edge"]) | (RS == _R["imprecise"]))) | ctx.provisional
         soft = ((ST == FLAGGED) & _IS_SOFT[RS] & ~rel).nonzero()[0]
         if soft.size:
             rel[self._inconsistent(soft, X, Y, ST, res, t, since="fed")] = True
