@@ -373,7 +373,7 @@ def test_a_glitch_hypothesis_needs_three_markers_where_predicted():
     assert a["ok"].sum() > 120  # (measured 147)
 
 
-@pytest.mark.parametrize("seed, min_ok", [(946, 0), (1011, 0)])
+@pytest.mark.parametrize("seed, min_ok", [(946, 900), (1011, 1250)])  # (measured 1047, 1455)
 def test_a_dot_at_the_view_edge_does_not_start_on_the_dot_behind(seed, min_ok):
     # fresh DEV seeds 946 and 1011 cam1 (session 27). 946: a dot 8 px from the left edge,
     # the grid moving 20 px on frame 1 at a 32 px spacing, took the dot behind it 18 px
@@ -396,4 +396,4 @@ def test_a_grid_left_ambiguous_does_not_resume_on_the_dots_behind():
     # dot on a constant-velocity path to them (IdentityStage._off_path).
     a = _glitched_errors("black", "cam1", 1011)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
-    assert a["ok"].sum() > 0
+    assert a["ok"].sum() > 1100  # (measured 1290; 1200 before, 3 of them 28-55 px off)
