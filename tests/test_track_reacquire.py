@@ -4,7 +4,7 @@ import pytest
 
 from wingphoto import track_markers
 from wingphoto.synth import scenarios
-from wingphoto.track.reacquire import _determined, _line_prediction
+from wingphoto.track.reacquire import _determined, _hinges, _line_prediction
 from wingphoto.validation import point_errors
 
 
@@ -87,3 +87,18 @@ def test_edge_on_left_no_marker_reacquired_a_row_off(edge_on_dev1):
     a = point_errors(tr, seq, "left")
     ok = a["ok"] & np.isfinite(a["error"])
     assert not (a["error"][ok] > 1.0).any(), np.argwhere(ok & (a["error"] > 1.0))[:5]
+
+
+def test_four_neighbours_one_of_which_alone_places_the_marker_are_hinged():
+    # fresh DEV seed 1072 cam2, dropped, frame 38, reference-frame positions: three dots
+    # nearly on a line and one beside them (33, followed one grid spacing off); the lost
+    # dot 40 lies beside the line, on 33's side. The map of the four put 40 on the dot
+    # behind it; without 33 the other three do not determine where 40 goes: 33 is the
+    # hinge, and must have been certain since 40 was last ok.
+    src = np.array([[163.0, 65.0], [188.0, 21.0], [171.0, 99.0], [154.0, 30.0]])
+    p0 = np.array([197.0, 56.0])
+    assert _determined(p0, src)
+    assert _hinges(p0, src).tolist() == [False, True, False, False]
+    # four corners of a square around the marker: any three still determine it
+    square = np.array([[0.0, 0.0], [30.0, 0.0], [0.0, 30.0], [30.0, 30.0]])
+    assert not _hinges(np.array([15.0, 12.0]), square).any()
