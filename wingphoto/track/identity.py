@@ -662,8 +662,13 @@ class IdentityStage:
         ambiguous (flagged, not trusted), never moved. Without such a group the match
         stands as it is, but one further than half the marker's spacing from where it was
         while its neighbours did not move together is marked in ``unvouched`` (its point
-        is flagged ``ambiguous``). Prevents a marker starting (or restarting) on its
-        neighbour's or an unpicked marker's blob when its own is dim or the two look alike.
+        is flagged ``ambiguous``). With fewer than two anchors a far match stands, marked
+        ``ctx.provisional`` (flagged, fed) where the marker's own blob may lie where no
+        template fits (:meth:`_beyond_view`). A match contested by its neighbours
+        (:meth:`_contested`) or off the path the previous image shows (:meth:`_off_path`)
+        is marked ``ctx.unvouched``, and the latter anchors nothing. Prevents a marker
+        starting (or restarting) on its neighbour's or an unpicked marker's blob when its
+        own is dim or the two look alike.
         """
         p = self.p
         pred, unvouched, provisional = ctx.pred, ctx.unvouched, ctx.provisional
