@@ -94,7 +94,7 @@ def test_four_neighbours_one_of_which_alone_places_the_marker_are_hinged():
     # nearly on a line and one beside them (33, followed one grid spacing off); the lost
     # dot 40 lies beside the line, on 33's side. The map of the four put 40 on the dot
     # behind it; without 33 the other three do not determine where 40 goes: 33 is the
-    # hinge, and must have been certain since 40 was last ok.
+    # hinge, and its identity must not have been in doubt since 40 was last ok.
     src = np.array([[163.0, 65.0], [188.0, 21.0], [171.0, 99.0], [154.0, 30.0]])
     p0 = np.array([197.0, 56.0])
     assert _determined(p0, src)

@@ -404,8 +404,9 @@ def test_a_dot_is_not_reacquired_by_four_neighbours_one_of_them_a_spacing_off():
     # grid more than a spacing, dot 33 was followed one spacing off, flagged imprecise, and
     # served as one of four neighbours whose reference-frame map re-acquired dot 40 on the
     # dot behind it: ok 35 px off for 9 frames. Four neighbours one of which alone places
-    # the marker (its hinge, here 33, ambiguous on frame 29) predict it only if that one was
-    # certain since the marker was last ok (reacquire._hinges, ReacquireStage._sure_since).
+    # the marker (its hinge, here 33, ambiguous on frame 29) predict it only if that one's
+    # identity was not in doubt since the marker was last ok (reacquire._hinges,
+    # ReacquireStage._sure_since).
     a = _glitched_errors("dropped", "cam2", 1072)
     assert not (a["error"][a["ok"]] > 1.0).any(), np.argwhere(a["ok"] & (a["error"] > 1.0))[:10]
     assert a["ok"].sum() > 380  # (measured 452; 444 before, 9 of them 35 px off)
