@@ -15,6 +15,15 @@ import numpy as np
 from . import engine
 from .engine import jit
 
+
+def _frames_since(t0, t, T):
+    """The frames strictly between a marker's last ok frame ``t0`` and frame ``t``, in the
+    order of the pass (none when ``t0`` is not a frame of the ``T`` rows)."""
+    if not 0 <= t0 < T:
+        return np.zeros(0, np.int64)
+    return np.arange(t0, t, 1 if t > t0 else -1)[1:]
+
+
 #: A step of a marker's path while not ok that differs from the step before by more than
 #: this fraction of its spacing is a hop onto another blob.
 HOP_FRACTION = 0.4

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .hop import HOP_FRACTION, from_last_reacquisition, hopped
+from .hop import HOP_FRACTION, _frames_since, from_last_reacquisition, hopped
 from .geometry import _apply_affine, _fit_affine, _nearest_two, _neighbour_prediction
 from . import engine
 from .match import _analyse_maps, _climb_kernel
@@ -31,14 +31,6 @@ CONTRADICT_NEIGHBOURS = 3
 #: twice re-acquisition's :data:`~.reacquire._AMPLIFY`: the map only flags, with a
 #: tolerance of ``ASTRAY_FRACTION`` of the spacing, not a pixel).
 CONTRADICT_AMPLIFY = 8.0
-
-
-def _frames_since(t0, t, T):
-    """The frames strictly between a marker's last ok frame ``t0`` and frame ``t``, in the
-    order of the pass (none when ``t0`` is not a frame of the ``T`` rows)."""
-    if not 0 <= t0 < T:
-        return np.zeros(0, np.int64)
-    return np.arange(t0, t, 1 if t > t0 else -1)[1:]
 
 
 #: Frames in a row without a position after which a marker found again on its own
@@ -621,8 +613,7 @@ class IdentityStage:
         via = pred[i] + d * ((g - 1) / g)[:, None]
         rr = np.maximum(_PATH_MIN_PX, np.ceil(_PATH_SLACK * np.hypot(d[:, 0], d[:, 1]))).astype(np.int64)
         ci = np.rint(via).astype(np.int64)
-        inside = ((ci[:, 0] - self.h[i] >= 0) & (ci[:, 1] - self.h[i] >= 0)
-                  & (ci[:, 0] + self.h[i] <= self.W - 1) & (ci[:, 1] + self.h[i] <= self.H - 1))
+        inside = self._fit_margin(i, ci) >= 0
         k, i, ci, rr = k[inside], i[inside], ci[inside], rr[inside]
         if not k.size:
             return out
@@ -644,8 +635,7 @@ class IdentityStage:
         neighbours ambiguous, and was ok one spacing further off on every frame (32-128
         px); fresh seed 1011 cam1: a dot 6 px from the top edge, leaving the view, took the
         dot behind it, ok 28 and 55 px off."""
-        h = self.h[i]
-        return bool(min(at[0] - h, self.W - 1 - h - at[0], at[1] - h, self.H - 1 - h - at[1]) < reach)
+        return bool(self._fit_margin(np.array([i]), np.asarray(at)[None, :])[0] < reach)
 
     def _consensus(self, frame, idx, wsel, mx, my, score, second, excl, ctx):
         """Check wide-search matches (no velocity yet) against the wing's local motion.
@@ -740,9 +730,7 @@ class IdentityStage:
         redo = np.array(redo)
         q = np.array(qs)
         qi = np.rint(q).astype(np.int64)
-        hb = self.h[idx[redo]]
-        okq = ((qi[:, 0] - hb >= 0) & (qi[:, 1] - hb >= 0) & (qi[:, 0] + hb <= self.W - 1)
-               & (qi[:, 1] + hb <= self.H - 1))
+        okq = self._fit_margin(idx[redo], qi) >= 0
         redo, q, qi = redo[okq], q[okq], qi[okq]
         if not redo.size:
             return

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from .geometry import _apply_affine, _neighbour_prediction, _robust_affine
+from .hop import _frames_since
 from .match import _GRID, _analyse_maps
 from .predict import STILL_SPEED
 from .refine import _refine
@@ -316,11 +317,8 @@ class ReacquireStage:
         re-acquired - cost the dropped stress 0.8 %.)"""
         if not len(nbrs):
             return True
-        T = res.x.shape[0]
-        t0 = int(self.last_ok[i])
-        step = 1 if t0 <= t else -1
-        rows = [f for f in range(t0 + step, t, step) if 0 <= f < T]
-        return not rows or not np.isin(res.reason[np.ix_(rows, nbrs)], _DOUBT).any()
+        rows = _frames_since(int(self.last_ok[i]), t, res.x.shape[0])
+        return not np.isin(res.reason[np.ix_(rows, nbrs)], _DOUBT).any()
 
     def _certain_lately(self, res, t, direction):
         """Markers ok or only ``imprecise`` on each of the last :data:`_ANCHOR_FRAMES`
@@ -390,8 +388,7 @@ class ReacquireStage:
         found = {}
         for i, (qi, rad, min_sc, nbrs) in q.items():
             ci = np.rint(qi).astype(np.int64)
-            hh = int(self.h[i])
-            if ci[0] - hh < 0 or ci[1] - hh < 0 or ci[0] + hh > self.W - 1 or ci[1] + hh > self.H - 1:
+            if self._fit_margin(np.array([i]), ci[None, :])[0] < 0:
                 continue
             maps, origin, shp = self._match(frame, np.array([i]), ci[None, :], [rad])
             m = maps.shape[1]

@@ -30,6 +30,14 @@ class TemplateStage:
     Reads the tracker's ``h`` (template half sizes), ``p.original_weight`` and ``is_u8``.
     """
 
+    def _fit_margin(self, idx, at):
+        """How far (px) each point ``at`` ((m, 2), x y) lies inside the region where the
+        template of marker ``idx[k]`` can be centred whole (``h`` px from every image
+        edge); negative where it does not fit. (m,) array."""
+        at = np.asarray(at, np.float64)
+        h = np.asarray(self.h, np.float64)[idx]
+        return np.minimum.reduce([at[:, 0] - h, self.W - 1 - h - at[:, 0], at[:, 1] - h, self.H - 1 - h - at[:, 1]])
+
     def _cut(self, frame, x, y, h):
         """Template of size 2h+1 centred on sub-pixel (x, y), float32."""
         s = 2 * int(h) + 1
